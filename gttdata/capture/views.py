@@ -1,0 +1,173 @@
+"""Sequencing views: what a solver may see of a capture under none / partial / full sequencing."""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from gttdata.capture.sample import CaptureSample, affinity_from_neighbours
+from gttdata.skeleton import Skeleton
+
+__all__ = ["SEQUENCING", "Observations", "GroundTruth", "make_view"]
+
+#: The three sequencing conditions of the paper.
+SEQUENCING: tuple[str, ...] = ("none", "partial", "full")
+
+
+@dataclass(frozen=True)
+class Observations:
+    """The inputs of a reconstruction: 2-D joints and cameras, and only the timing the condition allows.
+
+    Image order carries no information beyond what ``sequencing`` grants:
+    * ``none``: images are randomly permuted; ``stream_index`` and ``timestamp_s`` are None.
+    * ``partial``: images are grouped by camera (ascending ``cam_id``), each stream in its own order;
+      ``stream_index`` is given, ``timestamp_s`` is None. The streams' relative timing is unknown.
+    * ``full``: images are in true global time order; ``timestamp_s`` and ``stream_index`` are given.
+
+    Args:
+        sequencing: One of :data:`SEQUENCING`.
+        skeleton: Joint topology (J joints).
+        cam_id: Camera of each image, shape ``(N,)`` int.
+        K: Intrinsics per image, pixels, shape ``(N, 3, 3)``.
+        cam_from_world: World→camera transform per image, shape ``(N, 4, 4)``.
+        keypoints_px: 2-D joints, pixels, shape ``(N, J, 2)``; NaN where missing.
+        visible: Observed-joint mask, shape ``(N, J)`` bool.
+        image_size: ``(width, height)`` per camera, shape ``(V, 2)``.
+        stream_index: Index within the camera stream, shape ``(N,)``, or None.
+        timestamp_s: Capture times, seconds, shape ``(N,)``, or None.
+    """
+
+    sequencing: str
+    skeleton: Skeleton
+    cam_id: np.ndarray
+    K: np.ndarray
+    cam_from_world: np.ndarray
+    keypoints_px: np.ndarray
+    visible: np.ndarray
+    image_size: np.ndarray
+    stream_index: np.ndarray | None = None
+    timestamp_s: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.sequencing not in SEQUENCING:
+            raise ValueError(f"sequencing must be one of {SEQUENCING}, got {self.sequencing!r}")
+        if self.sequencing == "none" and (self.stream_index is not None or self.timestamp_s is not None):
+            raise ValueError("sequencing 'none' must not carry stream_index or timestamp_s")
+        if self.sequencing == "partial" and (self.stream_index is None or self.timestamp_s is not None):
+            raise ValueError("sequencing 'partial' needs stream_index and must not carry timestamp_s")
+        if self.sequencing == "full" and self.timestamp_s is None:
+            raise ValueError("sequencing 'full' needs timestamp_s")
+
+    @property
+    def n_images(self) -> int:
+        """Number of images N."""
+        return int(self.cam_id.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints J."""
+        return int(self.keypoints_px.shape[1])
+
+    def centers(self) -> np.ndarray:
+        """Camera centre of each image in world, metres, shape ``(N, 3)``."""
+        R = self.cam_from_world[:, :3, :3]
+        t = self.cam_from_world[:, :3, 3]
+        return -np.einsum("nji,nj->ni", R, t)
+
+    def rays(self) -> np.ndarray:
+        """Unit viewing ray of every joint in world, shape ``(N, J, 3)``; zero where missing.
+
+        ``r = R^T K^-1 [u, v, 1]^T`` normalised, with R the world→camera rotation.
+        """
+        px = np.where(self.visible[..., None], self.keypoints_px, 0.0).astype(np.float64)
+        h = np.concatenate([px, np.ones(px.shape[:-1] + (1,))], axis=-1)
+        Kinv = np.linalg.inv(self.K)
+        d = np.einsum("nab,njb->nja", Kinv, h)
+        d = np.einsum("nba,njb->nja", self.cam_from_world[:, :3, :3], d)
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.where(self.visible[..., None], d, 0.0)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Ground truth aligned with an :class:`Observations` view. Never passed to a solver.
+
+    Args:
+        points3d: Joints in world, metres, shape ``(N, J, 3)``.
+        timestamp_s: True capture times, seconds, shape ``(N,)``.
+        global_order: Rank of each image in true time, shape ``(N,)``.
+        affinity_nbr: Temporal neighbours (view indices), shape ``(N, 2)``, -1 where none.
+        affinity_w: Interpolation weights of those neighbours, shape ``(N, 2)``.
+        perm: Stored index of each view image, shape ``(N,)``.
+    """
+
+    points3d: np.ndarray
+    timestamp_s: np.ndarray
+    global_order: np.ndarray
+    affinity_nbr: np.ndarray
+    affinity_w: np.ndarray
+    perm: np.ndarray
+
+    def affinity_binary(self) -> np.ndarray:
+        """Symmetric binary A^G in view order, shape ``(N, N)``."""
+        return affinity_from_neighbours(self.affinity_nbr, self.affinity_w, binary=True)
+
+    def affinity_continuous(self) -> np.ndarray:
+        """Row-wise continuous A^G in view order, shape ``(N, N)``."""
+        return affinity_from_neighbours(self.affinity_nbr, self.affinity_w, binary=False)
+
+
+def _view_permutation(sample: CaptureSample, sequencing: str, seed: int | None) -> np.ndarray:
+    n = sample.n_images
+    if sequencing == "full":
+        return np.argsort(sample.timestamp_s, kind="stable")
+    if sequencing == "partial":
+        return np.lexsort((sample.stream_index, sample.cam_id))
+    s = zlib.crc32(sample.name.encode()) if seed is None else seed
+    return np.random.default_rng(s).permutation(n)
+
+
+def make_view(
+    sample: CaptureSample, sequencing: str, *, seed: int | None = None
+) -> tuple[Observations, GroundTruth]:
+    """Split a sample into solver inputs and ground truth for one sequencing condition.
+
+    Args:
+        sample: The stored capture.
+        sequencing: ``"none"``, ``"partial"`` or ``"full"``.
+        seed: Seed of the random image permutation under ``"none"`` (default: from the sample name,
+            so a view is reproducible).
+
+    Returns:
+        ``(observations, ground_truth)``, both in the view's image order.
+    """
+    if sequencing not in SEQUENCING:
+        raise ValueError(f"sequencing must be one of {SEQUENCING}, got {sequencing!r}")
+    perm = _view_permutation(sample, sequencing, seed)
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.shape[0])
+    nbr = sample.affinity_nbr[perm]
+    nbr = np.where(nbr >= 0, inv[np.maximum(nbr, 0)], -1).astype(np.int32)
+    obs = Observations(
+        sequencing=sequencing,
+        skeleton=sample.skeleton,
+        cam_id=sample.cam_id[perm].copy(),
+        K=sample.K[perm].copy(),
+        cam_from_world=sample.cam_from_world[perm].copy(),
+        keypoints_px=sample.keypoints_px[perm].copy(),
+        visible=sample.visible[perm].copy(),
+        image_size=np.asarray(sample.image_size).copy(),
+        stream_index=None if sequencing == "none" else sample.stream_index[perm].copy(),
+        timestamp_s=sample.timestamp_s[perm].copy() if sequencing == "full" else None,
+    )
+    gt = GroundTruth(
+        points3d=sample.points3d[perm].copy(),
+        timestamp_s=sample.timestamp_s[perm].copy(),
+        global_order=sample.global_order[perm].copy(),
+        affinity_nbr=nbr,
+        affinity_w=sample.affinity_w[perm].copy(),
+        perm=perm,
+    )
+    return obs, gt

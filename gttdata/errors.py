@@ -1,0 +1,36 @@
+"""Exception types raised by gttdata; the CLI turns each into one readable line."""
+
+from __future__ import annotations
+
+__all__ = [
+    "GttDataError",
+    "MotionFormatError",
+    "RecipeError",
+    "RigError",
+    "ShardFormatError",
+    "ManifestError",
+]
+
+
+class GttDataError(Exception):
+    """Base class of every error gttdata raises on bad input or bad files."""
+
+
+class MotionFormatError(GttDataError):
+    """A motion file is malformed (names file, line or field, expected and found)."""
+
+
+class RecipeError(GttDataError):
+    """A recipe is invalid (names the key, the expected type or range, and the value found)."""
+
+
+class RigError(GttDataError):
+    """A camera or rig is invalid (singular K, non-orthonormal rotation, zero image size...)."""
+
+
+class ShardFormatError(GttDataError):
+    """A shard is corrupt, truncated or of an unknown schema version."""
+
+
+class ManifestError(GttDataError):
+    """A manifest is missing, malformed, or disagrees with the shards on disk."""

@@ -1,0 +1,23 @@
+"""Exception types raised by gttnet; the CLI turns each into one readable line."""
+
+from __future__ import annotations
+
+from gttdata.errors import GttDataError
+
+__all__ = ["GttNetError", "ImportFormatError", "SequencingError", "ModelError"]
+
+
+class GttNetError(GttDataError):
+    """Base class of gttnet's input errors."""
+
+
+class ImportFormatError(GttNetError):
+    """A reconstruction input file is malformed (names file, field, expected and found)."""
+
+
+class SequencingError(GttNetError):
+    """A method needs sequencing information the input does not have."""
+
+
+class ModelError(GttNetError):
+    """A model file is missing or incompatible."""

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# System packages the tests and previews use: the Debian mocap clips and an EGL/OSMesa GL stack.
+# Needs apt; on a system without it, the dependent tests skip with a reason.
+set -uo pipefail
+if ! command -v apt-get >/dev/null 2>&1; then
+  echo "system_deps: apt-get not found; mocap and GL tests will skip" >&2
+  exit 0
+fi
+gttdata motions fetch || echo "system_deps: 'gttdata motions fetch' failed; mocap tests will skip" >&2
