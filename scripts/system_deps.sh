@@ -7,3 +7,6 @@ if ! command -v apt-get >/dev/null 2>&1; then
   exit 0
 fi
 gttdata motions fetch || echo "system_deps: 'gttdata motions fetch' failed; mocap tests will skip" >&2
+if [ -x scripts/gl_deps.sh ]; then
+  bash scripts/gl_deps.sh || echo "system_deps: GL stack unavailable; 3D preview tests will skip" >&2
+fi
