@@ -29,13 +29,13 @@ _CMU31_PARENTS: tuple[int, ...] = (
     13, 24, 25, 26, 27, 28, 27,
 )  # fmt: skip
 
-#: BVH names used by the CMU BVH conversions, in the same order as CMU31_JOINTS.
+#: BVH names used by the CMU BVH conversions (cgspeed, e.g. 01_01.bvh), in the same order as CMU31_JOINTS.
 CMU31_BVH_ALIASES: tuple[str, ...] = (
     "Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
     "RHipJoint", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
     "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head",
-    "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftFingerBase", "LeftHandIndex1", "LThumb",
-    "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase", "RightHandIndex1", "RThumb",
+    "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftFingerBase", "LFingers", "LThumb",
+    "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase", "RFingers", "RThumb",
 )  # fmt: skip
 
 

@@ -1,0 +1,96 @@
+"""The ``gttdata motions`` commands: fetch, list and summarise mocap files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from gttdata.cli import friendly_errors
+from gttdata.mocap import load_motion
+from gttdata.mocap.fetch import default_cache_dir, fetch_motions, list_cached
+from gttdata.mocap.motion import Motion
+
+__all__ = ["motions", "register", "standing_height_m", "summarise_motion"]
+
+
+def standing_height_m(motion: Motion) -> float:
+    """Standing height estimate: 95th percentile over frames of the joints' vertical extent, metres.
+
+    Joints, not the body surface: the top joint is usually the head joint, so this sits below stature.
+    """
+    z = motion.positions[..., 2]
+    return float(np.percentile(z.max(axis=1) - z.min(axis=1), 95))
+
+
+def summarise_motion(motion: Motion) -> list[str]:
+    """Human-readable summary lines (lengths in mm, as in every gtt report)."""
+    pos = motion.positions
+    lo, hi = pos.min(axis=(0, 1)), pos.max(axis=(0, 1))
+    ext = (hi - lo) * 1000.0
+    h = standing_height_m(motion)
+    return [
+        f"name: {motion.name} ({motion.provenance.get('format', '?')})",
+        f"frames: {motion.n_frames}",
+        f"fps: {motion.fps_hz:g}",
+        f"joints: {motion.skeleton.n_joints} (skeleton {motion.skeleton.name})",
+        f"duration: {motion.duration_s:.2f} s",
+        f"extent: x {ext[0]:.0f} mm, y {ext[1]:.0f} mm, z {ext[2]:.0f} mm "
+        f"(z from {lo[2] * 1000:.0f} to {hi[2] * 1000:.0f} mm)",
+        f"standing height: {h:.2f} m ({h * 1000:.0f} mm, joints' vertical extent, 95th percentile)",
+    ]
+
+
+@click.group("motions")
+def motions() -> None:
+    """Fetch, list and inspect mocap files (cache: $GTT_CACHE or ~/.cache/gtt/motions)."""
+
+
+@motions.command("fetch")
+@click.option(
+    "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
+)
+@friendly_errors
+def fetch_cmd(dest: Path | None) -> None:
+    """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache."""
+    for p in fetch_motions(dest):
+        click.echo(str(p))
+
+
+@motions.command("list")
+@click.option(
+    "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
+)
+def list_cmd(dest: Path | None) -> None:
+    """List the cached motion files."""
+    cache = dest if dest is not None else default_cache_dir()
+    files = list_cached(cache)
+    if not files:
+        click.echo(f"no motion files in {cache}; run 'gttdata motions fetch'")
+        return
+    for p in files:
+        click.echo(f"{p}\t{p.stat().st_size / 1e6:.1f} MB")
+
+
+@motions.command("show")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option(
+    "--format", "fmt", default="auto", show_default=True, help="auto (by suffix) or bvh, amc, c3d, npz, hdf5."
+)
+@click.option("--scale", type=float, default=None, help="BVH only: metres per file unit.")
+@friendly_errors
+def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
+    """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height."""
+    if not file.exists() and not file.is_absolute() and (default_cache_dir() / file).is_file():
+        file = default_cache_dir() / file
+    options = {"scale": scale} if scale is not None else {}
+    motion = load_motion(file, fmt, **options)
+    click.echo(f"file: {file}")
+    for line in summarise_motion(motion):
+        click.echo(line)
+
+
+def register(main: click.Group) -> None:
+    """Attach the ``motions`` group to the ``gttdata`` CLI."""
+    main.add_command(motions)
