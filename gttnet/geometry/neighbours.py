@@ -1,0 +1,218 @@
+"""Per-image neighbourhoods and chain affinities under the none / partial / full sequencing conditions."""
+
+from __future__ import annotations
+
+import heapq
+import logging
+
+import numpy as np
+
+from gttnet.errors import SequencingError
+
+__all__ = ["neighbourhoods", "chain_affinity", "temporal_chain_affinity"]
+
+log = logging.getLogger(__name__)
+
+_SEQUENCING = ("none", "partial", "full")
+
+
+def _stream_links(cam_id: np.ndarray, stream_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Previous and next image of each image in its own stream (camera), shape ``(N,)`` each, -1 at ends."""
+    n = cam_id.shape[0]
+    order = np.lexsort((stream_index, cam_id))
+    same = cam_id[order][1:] == cam_id[order][:-1]
+    prev = np.full(n, -1, dtype=np.int64)
+    nxt = np.full(n, -1, dtype=np.int64)
+    prev[order[1:][same]] = order[:-1][same]
+    nxt[order[:-1][same]] = order[1:][same]
+    return prev, nxt
+
+
+def _ranked(cost: np.ndarray, order: np.ndarray | None) -> np.ndarray:
+    n = cost.shape[0]
+    if order is None:
+        order = np.argsort(cost, axis=1, kind="stable")
+    order = np.asarray(order, dtype=np.int64)
+    if order.shape != (n, n):
+        raise ValueError(f"order must have shape {(n, n)}, got {order.shape}")
+    return order
+
+
+def _partial_row(
+    i: int, rank: np.ndarray, finite: np.ndarray, cam: np.ndarray, prev, nxt, k: int
+) -> list[int]:
+    """Best-first growth: from each other stream, one contiguous run grown from its best-ranked image."""
+    heap: list[tuple[int, int]] = []
+    for s in np.unique(cam):
+        if s == cam[i]:
+            continue
+        members = np.nonzero((cam == s) & finite)[0]
+        if members.size:
+            best = members[np.argmin(rank[members])]
+            heap.append((int(rank[best]), int(best)))
+    heapq.heapify(heap)
+    seen = {j for _, j in heap}
+    out: list[int] = []
+    while heap and len(out) < k:
+        _, j = heapq.heappop(heap)
+        out.append(j)
+        for m in (prev[j], nxt[j]):
+            if m >= 0 and finite[m] and m not in seen:
+                seen.add(int(m))
+                heapq.heappush(heap, (int(rank[m]), int(m)))
+    return out
+
+
+def neighbourhoods(
+    cost: np.ndarray,
+    *,
+    sequencing: str,
+    cam_id: np.ndarray,
+    stream_index: np.ndarray | None = None,
+    timestamp_s: np.ndarray | None = None,
+    k: int = 20,
+    order: np.ndarray | None = None,
+) -> np.ndarray:
+    """The K neighbours of each image (the image itself excluded), restricted by the sequencing condition.
+
+    * ``none``: the K best-ranked images of other cameras with finite pseudo-triangulation cost.
+    * ``partial`` (paper Sec. 3.4, scenario 2): same-stream images are dropped, and from every other
+      stream only images *adjacent among themselves* are kept. Rule used: best-first growth. Each
+      other stream's best-ranked image seeds a run; repeatedly the best-ranked image among all runs'
+      frontier images (the stream predecessor of a run's first image, the successor of its last, and
+      the seeds not yet taken) is added, until K are taken. The kept images of each stream thus form
+      one contiguous run of that stream, which rejects a similar-looking pose from another time of the
+      same stream (repetitive motion), and come in near-cost order.
+    * ``full``: the K images nearest in time (any camera, ties by index); ``cost`` is not used.
+
+    Args:
+        cost: Pair cost from :func:`~gttnet.geometry.triangulation.pseudo_triangulate`, shape ``(N, N)``;
+            ``+inf`` entries are never neighbours under ``none`` and ``partial``.
+        sequencing: ``"none"``, ``"partial"`` or ``"full"``.
+        cam_id: Camera (= stream) of each image, shape ``(N,)``.
+        stream_index: Index within its stream, shape ``(N,)`` (needed for ``partial``).
+        timestamp_s: Capture times in seconds, shape ``(N,)`` (needed for ``full``).
+        k: Number of neighbours K.
+        order: Ranked neighbours, shape ``(N, N)`` (e.g. ``PseudoTriangulation.order``, which includes
+            the near-parallel demotion); default: argsort of ``cost`` rows.
+
+    Returns:
+        Neighbour indices, shape ``(N, K)`` int64, best first, ``-1`` padded when fewer exist.
+
+    Raises:
+        SequencingError: If the condition needs ``stream_index`` or ``timestamp_s`` and it is None.
+
+    Example:
+        >>> cost = np.array([[np.inf, 1.0, 2.0], [1.0, np.inf, 3.0], [2.0, 3.0, np.inf]])
+        >>> neighbourhoods(cost, sequencing="none", cam_id=np.array([0, 1, 1]), k=2).tolist()
+        [[1, 2], [0, -1], [0, -1]]
+    """
+    if sequencing not in _SEQUENCING:
+        raise ValueError(f"sequencing must be one of {_SEQUENCING}, got {sequencing!r}")
+    cost = np.asarray(cost, dtype=np.float64)
+    cam = np.asarray(cam_id)
+    n = cam.shape[0]
+    if cost.shape != (n, n):
+        raise ValueError(f"cost must have shape {(n, n)} to match cam_id, got {cost.shape}")
+    if k < 1:
+        raise ValueError(f"k must be >= 1, got {k}")
+    out = np.full((n, k), -1, dtype=np.int64)
+    if sequencing == "full":
+        if timestamp_s is None:
+            raise SequencingError("sequencing 'full' needs timestamp_s")
+        t = np.asarray(timestamp_s, dtype=np.float64)
+        dt = np.abs(t[:, None] - t[None, :])
+        np.fill_diagonal(dt, np.inf)
+        nb = np.argsort(dt, axis=1, kind="stable")[:, :k]
+        m = min(k, n - 1)
+        out[:, :m] = nb[:, :m]
+        return out
+    order = _ranked(cost, order)
+    ok = np.isfinite(cost) & (cam[:, None] != cam[None, :])
+    if sequencing == "none":
+        ranked_ok = np.take_along_axis(ok, order, axis=1)
+        # Stable partition: allowed images first, in rank order.
+        keep = np.take_along_axis(order, np.argsort(~ranked_ok, axis=1, kind="stable"), axis=1)[:, :k]
+        cnt = np.minimum(ok.sum(1), k)
+        m = keep.shape[1]
+        out[:, :m] = np.where(np.arange(m)[None, :] < cnt[:, None], keep, -1)
+        return out
+    if stream_index is None:
+        raise SequencingError("sequencing 'partial' needs stream_index")
+    prev, nxt = _stream_links(cam, np.asarray(stream_index))
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(n)[None, :].repeat(n, 0), axis=1)
+    for i in range(n):
+        row = _partial_row(i, rank[i], ok[i], cam, prev, nxt, k)
+        out[i, : len(row)] = row
+    return out
+
+
+def chain_affinity(
+    cam_id: np.ndarray, stream_index: np.ndarray, *, row_normalise: bool = False
+) -> np.ndarray:
+    """Within-stream chain: links each image to its predecessor and successor in its own stream.
+
+    Under partial sequencing this is the only timing known (REFERENCE.md: W_const, and the chain added
+    to GTT-Net's sparse affinity). Streams are cameras; adjacency follows the ``stream_index`` rank, so
+    gaps in the index (dropped frames) still link.
+
+    Args:
+        cam_id: Camera (= stream) of each image, shape ``(N,)``.
+        stream_index: Index within the stream, shape ``(N,)``.
+        row_normalise: False: symmetric 0/1 matrix. True: each row sums to 1 (0.5/0.5 inside a
+            stream, 1 at its ends: the linear-interpolation chain); rows of one-image streams stay 0.
+
+    Returns:
+        Affinity of shape ``(N, N)`` float64, zero diagonal.
+
+    Example:
+        >>> chain_affinity(np.array([0, 0, 0, 1]), np.array([2, 0, 1, 0])).astype(int).tolist()
+        [[0, 0, 1, 0], [0, 0, 1, 0], [1, 1, 0, 0], [0, 0, 0, 0]]
+    """
+    cam = np.asarray(cam_id)
+    si = np.asarray(stream_index)
+    if si.shape != cam.shape or cam.ndim != 1:
+        raise ValueError(f"cam_id and stream_index must both have shape (N,), got {cam.shape} and {si.shape}")
+    n = cam.shape[0]
+    prev, nxt = _stream_links(cam, si)
+    A = np.zeros((n, n))
+    idx = np.arange(n)
+    A[idx[prev >= 0], prev[prev >= 0]] = 1.0
+    A[idx[nxt >= 0], nxt[nxt >= 0]] = 1.0
+    if row_normalise:
+        s = A.sum(1, keepdims=True)
+        A = np.divide(A, s, out=np.zeros_like(A), where=s > 0)
+    return A
+
+
+def temporal_chain_affinity(timestamp_s: np.ndarray, *, cam_id: np.ndarray | None = None) -> np.ndarray:
+    """Global time chain: links each image to the previous and next image in time (full sequencing).
+
+    Args:
+        timestamp_s: Capture times, seconds, shape ``(N,)``.
+        cam_id: Optional camera of each image, shape ``(N,)``: if given, the previous and next images
+            are taken among *other* cameras, as in the binary ground-truth affinity A^G.
+
+    Returns:
+        Symmetric 0/1 affinity, shape ``(N, N)`` float64, zero diagonal.
+
+    Example:
+        >>> temporal_chain_affinity(np.array([0.2, 0.0, 0.1])).astype(int).tolist()
+        [[0, 0, 1], [0, 0, 1], [1, 1, 0]]
+    """
+    t = np.asarray(timestamp_s, dtype=np.float64)
+    if t.ndim != 1:
+        raise ValueError(f"timestamp_s must have shape (N,), got {t.shape}")
+    n = t.shape[0]
+    order = np.argsort(t, kind="stable")
+    A = np.zeros((n, n))
+    if cam_id is None:
+        A[order[:-1], order[1:]] = 1.0
+    else:
+        cam = np.asarray(cam_id)[order]
+        for q in range(n):
+            nxt = np.nonzero(cam[q + 1 :] != cam[q])[0]
+            if nxt.size:
+                A[order[q], order[q + 1 + nxt[0]]] = 1.0
+    return np.maximum(A, A.T)

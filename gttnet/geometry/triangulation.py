@@ -1,0 +1,244 @@
+"""Pseudo-triangulation: pairwise ray-ray closest points giving the pair cost, neighbour order and X_init."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from gttnet.errors import GttNetError
+
+__all__ = ["PseudoTriangulation", "pseudo_triangulate", "closest_points_on_rays"]
+
+log = logging.getLogger(__name__)
+
+#: Rays whose squared sine of the angle between them is below this are treated as parallel.
+_PARALLEL_EPS = 1e-12
+
+
+@dataclass(frozen=True)
+class PseudoTriangulation:
+    """Result of :func:`pseudo_triangulate` for N images of J joints.
+
+    Args:
+        cost: Pair cost D(i, j), the mean normalised closest-point error over joints valid for the pair,
+            shape ``(N, N)``; ``+inf`` for same-camera pairs, the diagonal, and pairs with no valid joint.
+        convergence: Mean ``r_i . r_j`` over the joints valid for the pair (1 = parallel rays),
+            shape ``(N, N)``; NaN where no joint is valid.
+        valid: Whether joint p is valid for the pair (visible in both, different cameras, non-parallel
+            rays, both depths positive), shape ``(N, N, J)`` bool.
+        order: Ranked neighbours of each image: argsort of its cost row after demotion (see
+            ``min_angle_deg``), shape ``(N, N)`` int64; images with infinite cost come last.
+        X_init: Initial structure in world, metres, shape ``(N, J, 3)``; every visible joint lies on
+            its observed ray (see :func:`pseudo_triangulate` for how the others are filled).
+        source: Image whose ray triangulated each joint, shape ``(N, J)`` int64; ``-1`` where the
+            joint was filled instead.
+    """
+
+    cost: np.ndarray
+    convergence: np.ndarray
+    valid: np.ndarray
+    order: np.ndarray
+    X_init: np.ndarray
+    source: np.ndarray
+
+
+def closest_points_on_rays(
+    c1: np.ndarray, r1: np.ndarray, c2: np.ndarray, r2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depths of the closest points of two families of rays and the gap between them.
+
+    The closest points are ``c1 + s r1`` and ``c2 + t r2`` (common perpendicular). The gap is
+    computed from Plücker moments, ``|m1 . r2 + r1 . m2| / |r1 x r2|`` with ``m = c x r``, so two
+    intersecting rays give a gap that is exactly zero up to rounding of the products.
+
+    Args:
+        c1: Ray origins in world, metres, shape ``(..., 3)``.
+        r1: Unit ray directions, shape ``(..., 3)``.
+        c2: Ray origins, shape ``(..., 3)`` (broadcast against ``c1``).
+        r2: Unit ray directions, shape ``(..., 3)``.
+
+    Returns:
+        ``(s, t, gap)``: depths along each ray (metres) and the closest-point distance, each shape
+        ``(...)``; NaN where the rays are parallel.
+
+    Example:
+        >>> s, t, gap = closest_points_on_rays(np.zeros(3), np.array([1.0, 0, 0]),
+        ...                                    np.array([2.0, -1, 1]), np.array([0, 1.0, 0]))
+        >>> float(s), float(t), float(gap)
+        (2.0, 1.0, 1.0)
+    """
+    b = np.sum(r1 * r2, axis=-1)
+    w0 = c1 - c2
+    d = np.sum(r1 * w0, axis=-1)
+    e = np.sum(r2 * w0, axis=-1)
+    sin2 = 1.0 - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(sin2 > _PARALLEL_EPS, 1.0 / sin2, np.nan)
+        s = (b * e - d) * inv
+        t = (e - b * d) * inv
+        triple = np.sum(np.cross(c1, r1) * r2, axis=-1) + np.sum(r1 * np.cross(c2, r2), axis=-1)
+        gap = np.abs(triple) * np.sqrt(inv)
+    return s, t, gap
+
+
+def _pair_block(
+    rows: np.ndarray, rT: np.ndarray, mT: np.ndarray, rC: np.ndarray, C: np.ndarray, vis_T: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closest-point quantities of rows ``rows`` against every image, all shaped ``(J, B, N)``."""
+    ri = rT[:, rows]  # (J, B, 3)
+    b = ri @ rT.transpose(0, 2, 1)  # r_i . r_j
+    # d = r_i . (C_i - C_j), e = r_j . (C_i - C_j): cross terms are (J,B,3)@(3,N) matmuls.
+    d = rC[:, rows, None] - ri @ C.T
+    e = (rT @ C[rows].T).transpose(0, 2, 1) - rC[:, None, :]
+    triple = mT[:, rows] @ rT.transpose(0, 2, 1) + ri @ mT.transpose(0, 2, 1)
+    sin2 = 1.0 - b * b
+    ok = vis_T[:, rows, None] & vis_T[:, None, :] & (sin2 > _PARALLEL_EPS)
+    inv = 1.0 / np.where(ok, sin2, 1.0)
+    s = (b * e - d) * inv
+    t = (e - b * d) * inv
+    ok &= (s > 0) & (t > 0)
+    err = np.abs(triple) * np.sqrt(inv) / np.where(ok, s + t, 1.0)
+    return ok, err, b, s
+
+
+def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """Fill joints without a triangulation from the best-ranked neighbour that has one, else fallbacks."""
+    n, j, _ = X.shape
+    cand = have[order] & finite[:, :, None]  # (N, N, J): ranked neighbour m has joint p
+    first = np.argmax(cand, axis=1)  # (N, J)
+    found = np.take_along_axis(cand, first[:, None, :], axis=1)[:, 0]
+    nb = np.take_along_axis(order, first, axis=1)
+    out = X.copy()
+    fill = ~have & found
+    out[fill] = X[nb[fill], np.nonzero(fill)[1]]
+    rest = ~have & ~found
+    if rest.any():
+        # No ranked neighbour has this joint: the joint's mean over all images, else the image centroid.
+        cnt = have.sum(0)
+        joint_mean = np.where(have[..., None], X, 0.0).sum(0) / np.maximum(cnt, 1)[:, None]
+        img_cnt = have.sum(1)
+        img_mean = np.where(have[..., None], X, 0.0).sum(1) / np.maximum(img_cnt, 1)[:, None]
+        glob = X[have].mean(0)
+        pick = np.where(
+            (cnt > 0)[None, :, None],
+            joint_mean[None],
+            np.where((img_cnt > 0)[:, None, None], img_mean[:, None], glob),
+        )
+        out[rest] = pick[rest]
+    return out
+
+
+def pseudo_triangulate(
+    centers: np.ndarray,
+    rays: np.ndarray,
+    visible: np.ndarray,
+    cam_id: np.ndarray,
+    *,
+    min_angle_deg: float = 0.0,
+    block_rows: int = 64,
+) -> PseudoTriangulation:
+    """Exhaustive pairwise pseudo-triangulation of N images (REFERENCE.md, "Pseudo-triangulation").
+
+    For every pair (i, j) of images from different cameras and every joint p visible in both, the
+    closest points ``c_ij = C_i + s r_i`` and ``c_ji = C_j + t r_j`` of the two rays give the error
+    ``|c_ij - c_ji| / (s + t)``. A joint is valid for the pair only if both depths are positive and the
+    rays are not parallel; an invalid joint is skipped for that pair only. The pair cost is the mean
+    error over valid joints (+inf if none); same-camera pairs are +inf.
+
+    Neighbour order: each cost row is argsorted. With ``min_angle_deg > 0`` a neighbour whose mean ray
+    convergence exceeds ``cos(min_angle_deg)`` (short baseline, unreliable depth) is *demoted*: it keeps
+    its relative rank but comes after every non-demoted finite-cost neighbour. ``cost`` is not changed.
+
+    X_init: a visible joint p of image i sits at ``C_i + s r_i`` where j is the best-ranked image in
+    ``order[i]`` for which p is valid, so it lies on its own ray. Joints that are missing in image i,
+    or visible but valid for no pair, are filled with the estimate of p in the best-ranked neighbour
+    that has one; a visible joint filled this way is then projected onto its own ray (depth clipped to
+    be positive). If no ranked neighbour has p: the mean of p over all images, else the image's
+    centroid.
+
+    Args:
+        centers: Camera centre of each image in world, metres, shape ``(N, 3)``.
+        rays: Unit viewing rays in world, shape ``(N, J, 3)`` (anything where not visible).
+        visible: Observed-joint mask, shape ``(N, J)`` bool.
+        cam_id: Camera of each image, shape ``(N,)`` int.
+        min_angle_deg: Demote neighbours whose mean ray angle is below this, degrees (0 = off).
+        block_rows: Rows of the cost matrix computed at once (memory ~ 60 * block_rows * N * J bytes).
+
+    Returns:
+        A :class:`PseudoTriangulation`.
+
+    Raises:
+        GttNetError: If no joint of any pair can be triangulated (e.g. a single camera).
+
+    Example:
+        >>> C = np.array([[0.0, -1, 0], [0.0, 1, 0]])
+        >>> r = np.array([[[0.0, 1, 1]], [[0.0, -1, 1]]]) / np.sqrt(2)
+        >>> pt = pseudo_triangulate(C, r, np.ones((2, 1), bool), np.array([0, 1]))
+        >>> float(pt.cost[0, 1]), bool(np.allclose(pt.X_init[0, 0], [0, 0, 1]))
+        (0.0, True)
+    """
+    C = np.asarray(centers, dtype=np.float64)
+    r = np.asarray(rays, dtype=np.float64)
+    vis = np.asarray(visible, dtype=bool)
+    cam = np.asarray(cam_id)
+    n, j = vis.shape
+    if C.shape != (n, 3) or r.shape != (n, j, 3) or cam.shape != (n,):
+        raise ValueError(
+            f"expected centers (N, 3), rays (N, J, 3), visible (N, J), cam_id (N,) with N={n}, J={j}; got "
+            f"{C.shape}, {r.shape}, {vis.shape}, {cam.shape}"
+        )
+    vis = (
+        vis
+        & np.all(np.isfinite(r), axis=-1)
+        & (np.abs(np.linalg.norm(np.nan_to_num(r), axis=-1) - 1.0) < 1e-6)
+    )
+    rT = np.ascontiguousarray(np.where(vis[..., None], r, 0.0).transpose(1, 0, 2))  # (J, N, 3)
+    mT = np.cross(C[None], rT)
+    rC = np.einsum("jnk,nk->jn", rT, C)
+    vis_T = vis.T
+    cost = np.full((n, n), np.inf)
+    conv = np.full((n, n), np.nan)
+    valid = np.zeros((n, n, j), dtype=bool)
+    for start in range(0, n, block_rows):
+        rows = np.arange(start, min(start + block_rows, n))
+        ok, err, b, _ = _pair_block(rows, rT, mT, rC, C, vis_T)
+        ok &= (cam[rows, None] != cam[None, :])[None]
+        cnt = ok.sum(0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cost[rows] = np.where(cnt > 0, np.where(ok, err, 0.0).sum(0) / cnt, np.inf)
+            conv[rows] = np.where(cnt > 0, np.where(ok, b, 0.0).sum(0) / cnt, np.nan)
+        valid[rows] = ok.transpose(1, 2, 0)
+    if not np.isfinite(cost).any():
+        raise GttNetError(
+            "pseudo-triangulation found no triangulable joint: need >= 2 cameras sharing a joint"
+        )
+    demoted = np.zeros((n, n), dtype=bool)
+    if min_angle_deg > 0:
+        demoted = np.nan_to_num(conv, nan=0.0) > np.cos(np.deg2rad(min_angle_deg))
+    finite = np.isfinite(cost)
+    order = np.lexsort((cost, demoted, ~finite), axis=-1).astype(np.int64)
+    X, source = _initial_structure(C, r, vis, valid, order, finite)
+    return PseudoTriangulation(cost=cost, convergence=conv, valid=valid, order=order, X_init=X, source=source)
+
+
+def _initial_structure(
+    C: np.ndarray, r: np.ndarray, vis: np.ndarray, valid: np.ndarray, order: np.ndarray, finite: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """X_init and the source image of each joint (see :func:`pseudo_triangulate`)."""
+    n, j = vis.shape
+    ranked = np.take_along_axis(valid, order[:, :, None], axis=1)  # (N, N, J) in rank order
+    first = np.argmax(ranked, axis=1)
+    have = np.take_along_axis(ranked, first[:, None, :], axis=1)[:, 0]
+    src = np.where(have, np.take_along_axis(order, first, axis=1), -1)
+    rows = np.broadcast_to(np.arange(n)[:, None], (n, j))
+    m = np.maximum(src, 0)
+    s, _, _ = closest_points_on_rays(C[rows], r, C[m], r[m, np.arange(j)[None, :]])
+    X = C[:, None, :] + np.where(have, s, 0.0)[..., None] * np.where(have[..., None], r, 0.0)
+    X = _fill_missing(X, have, order, finite)
+    lone = vis & ~have  # visible but valid for no pair: project the filled estimate onto the own ray
+    if lone.any():
+        depth = np.maximum(np.einsum("njk,njk->nj", X - C[:, None], r), 1e-3)
+        X = np.where(lone[..., None], C[:, None] + depth[..., None] * r, X)
+    return X, src.astype(np.int64)
