@@ -1,0 +1,139 @@
+"""SequenceInput: the observation-only tensors GTT-Net consumes, and their construction from Observations."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+import torch
+
+from gttdata.capture.views import Observations
+
+__all__ = ["SequenceInput", "prepare_inputs", "random_rotation"]
+
+
+@dataclass(frozen=True)
+class SequenceInput:
+    """Network input for one sequence: derived from observations only, never from ground truth.
+
+    Args:
+        x_init: Pseudo-triangulated structure in world, metres, shape ``(N, J, 3)`` (missing joints filled).
+        nbr: Neighbourhood of each image, shape ``(N, K)`` int64, ``-1`` padded.
+        centers: Camera centre per image in world, metres, shape ``(N, 3)``.
+        rays: Unit viewing rays in world, shape ``(N, J, 3)``, zero where missing.
+        visible: Observed joints, shape ``(N, J)`` bool.
+        chain: Within-stream chain affinity, shape ``(N, N)``, under ``partial`` sequencing; else None.
+        sequencing: ``"none"``, ``"partial"`` or ``"full"``.
+        domain: Skeleton topology name (selects the PointNet decoder).
+    """
+
+    x_init: torch.Tensor
+    nbr: torch.Tensor
+    centers: torch.Tensor
+    rays: torch.Tensor
+    visible: torch.Tensor
+    chain: torch.Tensor | None
+    sequencing: str
+    domain: str
+
+    @property
+    def n_images(self) -> int:
+        """Number of images N."""
+        return int(self.x_init.shape[0])
+
+    def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> SequenceInput:
+        """Move tensors to a device; floating tensors optionally cast to ``dtype``."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, torch.Tensor):
+                v = v.to(
+                    device=device, dtype=dtype if (dtype is not None and v.is_floating_point()) else None
+                )
+            out[f.name] = v
+        return replace(self, **out)
+
+    def rotated(self, R: torch.Tensor) -> SequenceInput:
+        """The same capture with structure and cameras rotated together about the world origin.
+
+        Neighbourhoods and the chain are rotation invariant and kept.
+
+        Args:
+            R: Rotation matrix, shape ``(3, 3)``.
+        """
+        R = R.to(self.x_init)
+        return replace(self, x_init=self.x_init @ R.T, centers=self.centers @ R.T, rays=self.rays @ R.T)
+
+
+def random_rotation(rng: np.random.Generator, *, mode: str = "so3") -> np.ndarray:
+    """A random rotation: uniform on SO(3) (``"so3"``) or about the vertical z axis (``"yaw"``).
+
+    Args:
+        rng: Random generator.
+        mode: ``"so3"``, ``"yaw"`` or ``"none"`` (identity).
+
+    Returns:
+        Rotation matrix, shape ``(3, 3)`` float64.
+    """
+    if mode == "none":
+        return np.eye(3)
+    if mode == "yaw":
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    if mode != "so3":
+        raise ValueError(f"rotation mode must be 'so3', 'yaw' or 'none', got {mode!r}")
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def prepare_inputs(obs: Observations, *, k: int, dtype: torch.dtype = torch.float32) -> SequenceInput:
+    """Pseudo-triangulate, build neighbourhoods and pack an :class:`Observations` for the network.
+
+    The neighbourhood respects the sequencing condition (under ``none`` no stream order is used); the
+    within-stream chain is built only under ``partial``.
+
+    Args:
+        obs: Solver inputs for one sequencing condition.
+        k: Neighbours per image K.
+        dtype: Floating dtype of the tensors.
+
+    Returns:
+        A :class:`SequenceInput` on the CPU.
+    """
+    from gttnet.geometry.neighbours import chain_affinity, neighbourhoods
+    from gttnet.geometry.triangulation import pseudo_triangulate
+
+    centers = obs.centers()
+    rays = obs.rays()
+    pt = pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
+    nbr = neighbourhoods(
+        pt.cost,
+        sequencing=obs.sequencing,
+        cam_id=obs.cam_id,
+        stream_index=obs.stream_index,
+        timestamp_s=obs.timestamp_s,
+        k=k,
+        order=pt.order,
+    )
+    chain = None
+    if obs.sequencing == "partial":
+        chain = torch.as_tensor(np.asarray(chain_affinity(obs.cam_id, obs.stream_index)), dtype=dtype)
+    x_init = np.nan_to_num(np.asarray(pt.X_init, dtype=np.float64))
+    return SequenceInput(
+        x_init=torch.as_tensor(x_init, dtype=dtype),
+        nbr=torch.as_tensor(np.asarray(nbr), dtype=torch.long),
+        centers=torch.as_tensor(centers, dtype=dtype),
+        rays=torch.as_tensor(rays, dtype=dtype),
+        visible=torch.as_tensor(obs.visible, dtype=torch.bool),
+        chain=chain,
+        sequencing=obs.sequencing,
+        domain=obs.skeleton.name,
+    )
