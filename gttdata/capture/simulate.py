@@ -1,0 +1,283 @@
+"""Simulate an unsynchronized multi-camera capture of a motion: timing, projection, noise, missing data."""
+
+from __future__ import annotations
+
+import logging
+import string
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from gttdata.cameras import CameraRig
+from gttdata.capture.noise import add_detection_noise
+from gttdata.capture.occlusion import drop_images, drop_joints, visible_in_camera
+from gttdata.capture.sample import CaptureSample, temporal_affinity
+from gttdata.capture.timing import camera_offsets, min_cross_camera_gap, sample_timestamps
+from gttdata.mocap.motion import Motion
+from gttdata.skeleton import Skeleton
+
+__all__ = ["CaptureParams", "merge_subjects", "project_images", "simulate_capture", "simulate_events"]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CaptureParams:
+    """Concrete capture parameters of one sample (the recipe's distributions, drawn).
+
+    Args:
+        fps_hz: Frame rate of each camera, Hz, length V.
+        duration_s: Capture duration (of each event), seconds.
+        stagger: Clock offset mode (see :data:`gttdata.capture.timing.STAGGER_MODES`).
+        min_gap_s: Smallest time between any two images, seconds.
+        jitter_s: Std of per-image timing jitter, seconds.
+        drift_ppm: Clock rate error of each camera, ppm, length V.
+        sigma_px: Std of the 2-D Gaussian noise, pixels.
+        outlier_rate: Probability that an observed joint is an outlier.
+        outlier_sigma_px: Std of an outlier's displacement, pixels.
+        joint_drop_rate: Probability that a joint is dropped at random.
+        image_drop_rate: Probability that a whole image is dropped.
+    """
+
+    fps_hz: tuple[float, ...]
+    duration_s: float
+    stagger: str = "even"
+    min_gap_s: float = 1e-4
+    jitter_s: float = 0.0
+    drift_ppm: tuple[float, ...] = ()
+    sigma_px: float = 0.0
+    outlier_rate: float = 0.0
+    outlier_sigma_px: float = 50.0
+    joint_drop_rate: float = 0.0
+    image_drop_rate: float = 0.0
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable form (lists for tuples)."""
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def project_images(
+    points3d: np.ndarray, K: np.ndarray, cam_from_world: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Project each image's joints with that image's camera.
+
+    Args:
+        points3d: Joints in world, metres, shape ``(N, J, 3)``.
+        K: Intrinsics per image, pixels, shape ``(N, 3, 3)``.
+        cam_from_world: World→camera transform per image, shape ``(N, 4, 4)``.
+
+    Returns:
+        ``(pixels, depth)``: shapes ``(N, J, 2)`` (NaN where depth <= 0) and ``(N, J)`` metres.
+    """
+    Xc = np.einsum("nab,njb->nja", cam_from_world[:, :3, :3], points3d) + cam_from_world[:, None, :3, 3]
+    uvw = np.einsum("nab,njb->nja", K, Xc)
+    depth = Xc[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = uvw[..., :2] / uvw[..., 2:3]
+    return np.where((depth > 0)[..., None], px, np.nan), depth
+
+
+def merge_subjects(motions: Sequence[Motion], offsets_m: np.ndarray) -> Motion:
+    """Several subjects as one motion whose skeleton stacks theirs (multi-subject captures).
+
+    Subject ``s`` keeps its joints in order, named with the prefix ``"a_"``, ``"b_"``, ... and moved by
+    ``offsets_m[s]``; joint ``s * J + j`` of the result is joint ``j`` of subject ``s``. The motions are
+    resampled to the first one's rate and cut to the shortest.
+
+    Args:
+        motions: S motions sharing one skeleton (J joints).
+        offsets_m: Translation of each subject in world, metres, shape ``(S, 3)``.
+
+    Returns:
+        A motion with ``S * J`` joints.
+    """
+    sk = motions[0].skeleton
+    if any(m.skeleton.joint_names != sk.joint_names for m in motions):
+        raise ValueError("merge_subjects: every motion must have the same skeleton joints")
+    fps = motions[0].fps_hz
+    ms = [m if m.fps_hz == fps else m.resample(fps) for m in motions]
+    t = min(m.n_frames for m in ms)
+    off = np.asarray(offsets_m, dtype=np.float64).reshape(len(ms), 1, 1, 3)
+    pos = np.concatenate([m.positions[:t][None] for m in ms]) + off
+    j = sk.n_joints
+    merged = Skeleton(
+        name=f"{sk.name}x{len(ms)}",
+        joint_names=tuple(f"{string.ascii_lowercase[s]}_{n}" for s in range(len(ms)) for n in sk.joint_names),
+        parents=tuple(p + s * j if p >= 0 else -1 for s in range(len(ms)) for p in sk.parents),
+        mirror=tuple(q + s * j for s in range(len(ms)) for q in sk.mirror),
+    )
+    return Motion(
+        positions=pos.transpose(1, 0, 2, 3).reshape(t, len(ms) * j, 3),
+        fps_hz=fps,
+        skeleton=merged,
+        name="+".join(m.name for m in ms),
+        provenance={"subjects": [m.name for m in ms], "n_subjects": len(ms)},
+    )
+
+
+def _timeline(params: CaptureParams, rng: np.random.Generator, n_cameras: int, total_s: float):
+    fps = np.asarray(params.fps_hz, dtype=np.float64)
+    if fps.shape != (n_cameras,):
+        raise ValueError(f"params.fps_hz must have one rate per camera ({n_cameras}), got {fps.shape[0]}")
+    drift = np.asarray(params.drift_ppm or (0.0,) * n_cameras, dtype=np.float64)
+    offsets = camera_offsets(fps, stagger=params.stagger, rng=rng)
+    cam, t, _ = sample_timestamps(
+        fps,
+        total_s,
+        offsets_s=offsets,
+        rng=rng,
+        jitter_s=params.jitter_s,
+        drift_ppm=drift,
+        min_gap_s=params.min_gap_s,
+    )
+    return cam, t, offsets
+
+
+def _stream_index(cam: np.ndarray) -> np.ndarray:
+    si = np.zeros(cam.shape[0], dtype=np.int32)
+    for v in np.unique(cam):
+        idx = np.flatnonzero(cam == v)
+        si[idx] = np.arange(idx.size)
+    return si
+
+
+def _simulate(
+    segments: Sequence[tuple[Motion, float]],
+    rig: CameraRig,
+    params: CaptureParams,
+    rng: np.random.Generator,
+    *,
+    name: str,
+    motion_name: str,
+) -> CaptureSample:
+    """Core simulation; ``segments`` are ``(motion, start_s)``, each lasting ``params.duration_s``."""
+    sk = segments[0][0].skeleton
+    total = segments[-1][1] + params.duration_s
+    cam, t, offsets = _timeline(params, rng, len(rig), total)
+    # Each image belongs to the event whose interval contains it; images in a gap are never taken.
+    starts = np.array([s for _, s in segments])
+    event = np.searchsorted(starts, t, side="right") - 1
+    keep = (event >= 0) & (t < starts[np.maximum(event, 0)] + params.duration_s)
+    cam, t, event = cam[keep], t[keep], event[keep]
+    if params.image_drop_rate > 0:
+        keep = drop_images(cam, rng, rate=params.image_drop_rate)
+        cam, t, event = cam[keep], t[keep], event[keep]
+    n = t.shape[0]
+    points = np.empty((n, sk.n_joints, 3))
+    for e, (motion, start) in enumerate(segments):
+        sel = event == e
+        points[sel] = motion.sample_at(t[sel] - start)
+    K = rig.K[cam]
+    T = rig.cam_from_world[cam]
+    size = np.array([c.image_size for c in rig.cameras], dtype=np.int32)
+    gt_px, depth = project_images(points, K, T)
+    noisy, outlier = add_detection_noise(
+        gt_px,
+        rng,
+        sigma_px=params.sigma_px,
+        outlier_rate=params.outlier_rate,
+        outlier_sigma_px=params.outlier_sigma_px,
+    )
+    visible = visible_in_camera(gt_px, depth, size[cam]) & drop_joints(
+        (n, sk.n_joints), rng, rate=params.joint_drop_rate
+    )
+    nbr = np.full((n, 2), -1, dtype=np.int32)
+    w = np.zeros((n, 2))
+    for e in range(len(segments)):  # disjoint events are never linked in the ground-truth affinity
+        idx = np.flatnonzero(event == e)
+        if idx.size:
+            nb, ww = temporal_affinity(t[idx], cam[idx], points[idx])
+            nbr[idx] = np.where(nb >= 0, idx[np.maximum(nb, 0)], -1)
+            w[idx] = ww
+    meta = {
+        "capture": params.to_dict(),
+        "offsets_s": offsets.tolist(),
+        "min_cross_camera_gap_s": min_cross_camera_gap(t, cam),
+        "n_outliers": int((outlier & visible).sum()),
+        "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
+    }
+    if len(segments) > 1:
+        meta["event_id"] = event.astype(int).tolist()
+        meta["event_start_s"] = starts.tolist()
+    return CaptureSample(
+        name=name,
+        motion_name=motion_name,
+        skeleton=sk,
+        cam_id=cam.astype(np.int32),
+        timestamp_s=t,
+        stream_index=_stream_index(cam),
+        global_order=np.arange(n, dtype=np.int32),
+        keypoints_px=np.where(visible[..., None], noisy, np.nan).astype(np.float32),
+        visible=visible,
+        keypoints_gt_px=gt_px.astype(np.float32),
+        K=K,
+        cam_from_world=T,
+        image_size=size,
+        points3d=points,
+        affinity_nbr=nbr,
+        affinity_w=w,
+        meta=meta,
+    )
+
+
+def simulate_capture(
+    motion: Motion,
+    rig: CameraRig,
+    params: CaptureParams,
+    rng: np.random.Generator,
+    *,
+    name: str,
+    motion_name: str | None = None,
+) -> CaptureSample:
+    """Film ``motion`` with ``rig`` during ``[0, params.duration_s)`` of its timeline.
+
+    Every image samples the motion at its own timestamp (linear interpolation), so cameras never share
+    an instant. Joints behind the camera or outside the image, and randomly dropped ones, are missing.
+
+    Args:
+        motion: The subject (positions in world, metres); its time 0 is the capture's time 0.
+        rig: V cameras.
+        params: Concrete capture parameters (``len(params.fps_hz) == V``).
+        rng: Random generator: the only source of randomness.
+        name: Sample name.
+        motion_name: Stored motion name (default ``motion.name``).
+
+    Returns:
+        The capture, images sorted by time; ``meta`` records every drawn parameter.
+    """
+    return _simulate([(motion, 0.0)], rig, params, rng, name=name, motion_name=motion_name or motion.name)
+
+
+def simulate_events(
+    motions: Sequence[Motion],
+    rig: CameraRig,
+    params: CaptureParams,
+    rng: np.random.Generator,
+    *,
+    gaps_s: Sequence[float],
+    name: str,
+    motion_name: str | None = None,
+) -> CaptureSample:
+    """Film several temporally disjoint events: motion ``e`` plays during its own ``params.duration_s``.
+
+    Events are separated by ``gaps_s`` during which no image is taken; ``meta["event_id"]`` (length N)
+    labels each image with its event and the ground-truth affinity never links two events.
+
+    Args:
+        motions: One motion per event (same skeleton), each played from its time 0.
+        rig: V cameras.
+        params: Concrete capture parameters.
+        rng: Random generator.
+        gaps_s: Gap after each event but the last, seconds, length ``len(motions) - 1``.
+        name: Sample name.
+        motion_name: Stored motion name (default: the motion names joined by ``"|"``).
+    """
+    if len(gaps_s) != len(motions) - 1:
+        raise ValueError(f"gaps_s must have {len(motions) - 1} entries, got {len(gaps_s)}")
+    starts = np.concatenate([[0.0], np.cumsum(np.asarray(gaps_s, dtype=np.float64) + params.duration_s)])
+    segments = list(zip(motions, starts.tolist(), strict=True))
+    return _simulate(
+        segments, rig, params, rng, name=name, motion_name=motion_name or "|".join(m.name for m in motions)
+    )

@@ -1,0 +1,344 @@
+"""Deterministic construction of sample ``i`` of a split from a recipe, independent of any other sample."""
+
+from __future__ import annotations
+
+import functools
+import glob
+import logging
+import os
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gttdata.augment import bone_scale, get_augmentation, mirror
+from gttdata.cameras import CameraRig, ring_rig
+from gttdata.capture.sample import CaptureSample
+from gttdata.capture.simulate import CaptureParams, merge_subjects, simulate_capture, simulate_events
+from gttdata.errors import RecipeError
+from gttdata.mocap.motion import Motion
+from gttdata.recipe import FileSource, GenerateRecipe, ProceduralSource, RingRigSpec, SplitSpec
+
+__all__ = [
+    "MotionRef",
+    "build_sample",
+    "list_motions",
+    "n_samples",
+    "sample_key",
+    "split_id",
+    "validate_inputs",
+]
+
+_log = logging.getLogger(__name__)
+
+#: Prefix of recipe paths that live in the motion cache of ``gttdata motions fetch``.
+CACHE_PREFIX = "cache:"
+
+
+@dataclass(frozen=True)
+class MotionRef:
+    """One motion a split may draw from.
+
+    Args:
+        name: Motion name (``procedural/<kind>/<seed>`` or the file stem); unique across splits.
+        source: Index of the source in the split.
+        kind: Procedural kind, or the loader format for a file.
+        seed: Procedural seed (-1 for files).
+        path: Resolved file path (``""`` for procedural motions).
+    """
+
+    name: str
+    source: int
+    kind: str
+    seed: int = -1
+    path: str = ""
+
+
+def split_id(split: str) -> int:
+    """Stable integer id of a split name (CRC-32), so split order in the recipe does not matter."""
+    return zlib.crc32(split.encode())
+
+
+def n_samples(recipe: GenerateRecipe) -> dict[str, int]:
+    """Number of samples per split, in recipe order."""
+    return {s.name: s.n_samples for s in recipe.splits}
+
+
+def sample_key(recipe: GenerateRecipe, split: str, index: int) -> str:
+    """Name of sample ``index`` of ``split``, e.g. ``"train/000017"`` (also ``CaptureSample.name``)."""
+    _split(recipe, split)
+    return f"{split}/{index:06d}"
+
+
+def _split(recipe: GenerateRecipe, split: str) -> SplitSpec:
+    for s in recipe.splits:
+        if s.name == split:
+            return s
+    raise RecipeError(f"split: expected one of {', '.join(s.name for s in recipe.splits)}, found {split!r}")
+
+
+def _resolve(pattern: str) -> str:
+    if pattern.startswith(CACHE_PREFIX):
+        from gttdata.mocap.fetch import default_cache_dir
+
+        return str(default_cache_dir() / pattern[len(CACHE_PREFIX) :].lstrip("/"))
+    return os.path.expanduser(os.path.expandvars(pattern))
+
+
+@functools.lru_cache(maxsize=256)
+def _expand(pattern: str) -> tuple[str, ...]:
+    resolved = _resolve(pattern)
+    hits = (
+        sorted(glob.glob(resolved))
+        if glob.has_magic(resolved)
+        else [resolved]
+        if Path(resolved).is_file()
+        else []
+    )
+    if not hits:
+        hint = " (run `gttdata motions fetch` first)" if pattern.startswith(CACHE_PREFIX) else ""
+        raise RecipeError(
+            f"paths: expected existing motion files, found no file for {pattern!r} -> {resolved}{hint}"
+        )
+    return tuple(hits)
+
+
+def list_motions(recipe: GenerateRecipe, split: str) -> tuple[MotionRef, ...]:
+    """Every motion of a split, in source order (file globs expanded, sorted)."""
+    refs: list[MotionRef] = []
+    for k, src in enumerate(_split(recipe, split).sources):
+        if isinstance(src, ProceduralSource):
+            kinds = src.kinds or _procedural_kinds()
+            for m in range(src.count):
+                kind, seed = kinds[m % len(kinds)], src.seed + m
+                refs.append(MotionRef(f"procedural/{kind}/{seed:06d}", k, kind, seed))
+        else:
+            for pattern in src.paths:
+                for p in _expand(pattern):
+                    refs.append(MotionRef(Path(p).stem, k, src.format, -1, p))
+    return tuple(refs)
+
+
+def validate_inputs(recipe: GenerateRecipe) -> dict[str, int]:
+    """Check, before any work, that every file source resolves and that no file is in two splits.
+
+    Returns:
+        Number of distinct motions per split.
+
+    Raises:
+        RecipeError: Naming the split and the offending pattern or file.
+    """
+    owner: dict[str, str] = {}
+    counts = {}
+    for split in recipe.splits:
+        try:
+            refs = list_motions(recipe, split.name)
+        except RecipeError as exc:
+            raise RecipeError(f"splits.{split.name}.sources.{exc}") from exc
+        for r in refs:
+            if r.path and owner.setdefault(os.path.realpath(r.path), split.name) != split.name:
+                raise RecipeError(
+                    f"splits.{split.name}.sources: expected motions disjoint across splits, found {r.path} "
+                    f"also in split {owner[os.path.realpath(r.path)]!r}"
+                )
+        counts[split.name] = len(refs)
+    return counts
+
+
+def _procedural_kinds() -> tuple[str, ...]:
+    from gttdata.mocap.procedural import PROCEDURAL_KINDS
+
+    return tuple(PROCEDURAL_KINDS)
+
+
+@functools.lru_cache(maxsize=32)
+def _procedural_motion(kind: str, seed: int, duration_s: float, fps_hz: float) -> Motion:
+    from gttdata.mocap.procedural import generate_motion
+
+    return generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+
+
+@functools.lru_cache(maxsize=64)
+def _file_motion(path: str, fmt: str) -> Motion:
+    from gttdata.mocap import load_motion
+
+    return load_motion(path, fmt=fmt)
+
+
+@functools.lru_cache(maxsize=8)
+def _file_rig(path: str) -> CameraRig:
+    return CameraRig.load(_resolve(path))
+
+
+def _load(ref: MotionRef, src: ProceduralSource | FileSource) -> Motion:
+    """The full (trimmed) motion of a reference; cached per process."""
+    if isinstance(src, ProceduralSource):
+        # The duration is a property of the motion, so it is drawn from the motion's own seed.
+        dur = float(src.duration_s.draw(np.random.default_rng([src.seed, ref.seed, 0x6D6F74])))
+        motion = _procedural_motion(ref.kind, ref.seed, dur, src.fps_hz)
+    else:
+        motion = _file_motion(ref.path, src.format)
+    if src.trim_start_s or src.trim_end_s:
+        motion = motion.trim(src.trim_start_s, motion.duration_s - src.trim_end_s)
+    return motion
+
+
+def _pick_refs(refs, sources, k: int, rng: np.random.Generator) -> list[MotionRef]:
+    """``k`` motions, by source weight (split evenly within a source), distinct when possible."""
+    per_source = np.bincount([r.source for r in refs], minlength=len(sources))
+    p = np.array([sources[r.source].weight / per_source[r.source] for r in refs])
+    idx = rng.choice(len(refs), size=k, replace=k > len(refs), p=p / p.sum())
+    return [refs[i] for i in np.atleast_1d(idx)]
+
+
+def _recenter(motion: Motion) -> Motion:
+    """Translate so the mean root position over the motion is above the world origin (z kept)."""
+    shift = motion.positions[:, 0, :].mean(axis=0)
+    shift[2] = 0.0
+    return Motion(motion.positions - shift, motion.fps_hz, motion.skeleton, motion.name, motion.provenance)
+
+
+def _build_rig(recipe: GenerateRecipe, rng: np.random.Generator) -> tuple[CameraRig, dict]:
+    spec = recipe.rig
+    if not isinstance(spec, RingRigSpec):
+        rig = _file_rig(spec.path)
+        return rig, {"kind": "file", "path": spec.path, "n_cameras": len(rig)}
+    d = {
+        "n_cameras": int(spec.n_cameras.draw(rng)),
+        "radius_m": float(spec.radius_m.draw(rng)),
+        "height_m": float(spec.height_m.draw(rng)),
+        "f_px": float(spec.f_px.draw(rng)),
+        "jitter_m": float(spec.jitter_m.draw(rng)),
+        "jitter_deg": float(spec.jitter_deg.draw(rng)),
+        "start_angle_deg": float(rng.uniform(0.0, 360.0)) if spec.random_azimuth else 0.0,
+    }
+    target = (0.0, 0.0, float(spec.target_height_m.draw(rng)))
+    rig = ring_rig(
+        d["n_cameras"],
+        target=target,
+        image_size=tuple(spec.image_size),
+        rng=rng,
+        **{k: v for k, v in d.items() if k != "n_cameras"},
+    )
+    return rig, {"kind": "ring", **d, "target": list(target), "image_size": list(spec.image_size)}
+
+
+def _capture_params(
+    recipe: GenerateRecipe, n_cameras: int, window_s: float, rng: np.random.Generator
+) -> CaptureParams:
+    c = recipe.capture
+    fps = c.fps_hz.draw(rng, size=1 if c.fps_shared else n_cameras)
+    return CaptureParams(
+        fps_hz=tuple(float(f) for f in np.broadcast_to(fps, (n_cameras,))),
+        duration_s=window_s,
+        stagger=c.stagger,
+        min_gap_s=c.min_gap_s,
+        jitter_s=float(c.jitter_s.draw(rng)),
+        drift_ppm=tuple(float(d) for d in c.drift_ppm.draw(rng, size=n_cameras)),
+        sigma_px=float(c.sigma_px.draw(rng)),
+        outlier_rate=float(c.outlier_rate.draw(rng)),
+        outlier_sigma_px=float(c.outlier_sigma_px.draw(rng)),
+        joint_drop_rate=float(c.joint_drop_rate.draw(rng)),
+        image_drop_rate=float(c.image_drop_rate.draw(rng)),
+    )
+
+
+def _scene_motions(recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.random.Generator):
+    """Motion windows of every event (subjects merged); also the window length and per-motion records."""
+    scene = recipe.scene
+    n_events = int(scene.n_events.draw(rng))
+    picked = _pick_refs(refs, split.sources, n_events * scene.n_subjects, rng)
+    full = [_load(r, split.sources[r.source]) for r in picked]
+    first = split.sources[picked[0].source]
+    window = float((first.window_s or recipe.capture.window_s).draw(rng))
+    shortest = min(m.duration_s for m in full)
+    if window > shortest:
+        _log.warning(
+            "window %.3f s is longer than motion %s (%.3f s): using %.3f s",
+            window,
+            picked[0].name,
+            shortest,
+            shortest,
+        )
+        window = shortest
+    maug = recipe.motion_augment
+    records, events = [], []
+    for e in range(n_events):
+        subjects = []
+        for s in range(scene.n_subjects):
+            ref, motion = picked[e * scene.n_subjects + s], full[e * scene.n_subjects + s]
+            start = float(rng.uniform(0.0, motion.duration_s - window))
+            m = motion.trim(start, start + window + 2.0 / motion.fps_hz)
+            m2 = mirror(m, rng, prob=maug.mirror_prob)
+            factor = float(maug.bone_scale.draw(rng))
+            m3 = bone_scale(m2, rng, factor=factor)
+            subjects.append(_recenter(m3) if recipe.capture.recenter else m3)
+            records.append(
+                {
+                    "name": ref.name,
+                    "event": e,
+                    "subject": s,
+                    "start_s": start,
+                    "mirrored": m2 is not m,
+                    "bone_scale": factor,
+                }
+            )
+        if len(subjects) > 1:
+            heading = rng.uniform(0.0, 2 * np.pi)
+            sep = float(scene.subject_separation_m.draw(rng))
+            along = (np.arange(len(subjects)) - (len(subjects) - 1) / 2) * sep
+            offsets = along[:, None] * np.array([np.cos(heading), np.sin(heading), 0.0])
+            events.append(merge_subjects(subjects, offsets))
+        else:
+            events.append(subjects[0])
+    return events, window, records
+
+
+def build_sample(recipe: GenerateRecipe, split: str, index: int) -> list[CaptureSample]:
+    """Build sample ``index`` of ``split``: the original capture and its stored augmented variants.
+
+    All randomness comes from ``SeedSequence([recipe.seed, split_id(split), index])``, so a sample
+    can be rebuilt alone and the result does not depend on worker count or order.
+
+    Args:
+        recipe: A validated recipe.
+        split: Split name.
+        index: Sample index in ``[0, n_samples[split])``.
+
+    Returns:
+        ``[orig, *variants]``, one variant per ``recipe.augmentations`` entry, all with the same name.
+    """
+    spec = _split(recipe, split)
+    if not 0 <= index < spec.n_samples:
+        raise RecipeError(f"index: expected 0 <= index < {spec.n_samples} for split {split!r}, found {index}")
+    ss = np.random.SeedSequence([recipe.seed, split_id(split), index])
+    r_motion, r_rig, r_capture, r_sim, *r_aug = (
+        np.random.default_rng(c) for c in ss.spawn(4 + len(recipe.augmentations))
+    )
+    events, window, records = _scene_motions(recipe, spec, list_motions(recipe, split), r_motion)
+    rig, rig_meta = _build_rig(recipe, r_rig)
+    params = _capture_params(recipe, len(rig), window, r_capture)
+    name = sample_key(recipe, split, index)
+    motion_name = "|".join(dict.fromkeys(r["name"] for r in records))
+    if len(events) > 1:
+        gaps = np.atleast_1d(recipe.scene.event_gap_s.draw(r_capture, size=len(events) - 1)).tolist()
+        sample = simulate_events(events, rig, params, r_sim, gaps_s=gaps, name=name, motion_name=motion_name)
+    else:
+        sample = simulate_capture(events[0], rig, params, r_sim, name=name, motion_name=motion_name)
+    meta = {
+        **sample.meta,
+        "split": split,
+        "index": index,
+        "recipe_seed": recipe.seed,
+        "rig": rig_meta,
+        "motions": records,
+        "n_events": len(events),
+        "n_subjects": recipe.scene.n_subjects,
+    }
+    orig = sample.replace(meta=meta)
+    out = [orig]
+    for aug_spec, rng in zip(recipe.augmentations, r_aug, strict=True):
+        aug = get_augmentation(aug_spec.name, level="capture")
+        out.append(aug.fn(orig, rng, **aug_spec.params))
+    return out

@@ -1,0 +1,158 @@
+"""Load, validate, serialise and hash ``gttdata generate`` recipes (YAML <-> typed dataclasses)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import yaml
+
+from gttdata.errors import RecipeError
+from gttdata.recipe._parse import apply_overrides, build_dataclass, to_plain
+from gttdata.recipe.param import PARAM_KINDS, Param
+from gttdata.recipe.schema import (
+    AugmentSpec,
+    CaptureSpec,
+    FileRigSpec,
+    FileSource,
+    GenerateRecipe,
+    MotionAugmentSpec,
+    ProceduralSource,
+    RingRigSpec,
+    SceneSpec,
+    ShardSpec,
+    SplitSpec,
+)
+
+__all__ = [
+    "AugmentSpec",
+    "CaptureSpec",
+    "FileRigSpec",
+    "FileSource",
+    "GenerateRecipe",
+    "MotionAugmentSpec",
+    "PARAM_KINDS",
+    "Param",
+    "ProceduralSource",
+    "RingRigSpec",
+    "SceneSpec",
+    "ShardSpec",
+    "SplitSpec",
+    "load_recipe",
+    "parse_recipe",
+    "recipe_hash",
+    "recipe_to_dict",
+]
+
+
+def _check_splits(recipe: GenerateRecipe, source: str) -> None:
+    """Split names are unique and no motion (procedural seed or file path) is in two splits."""
+    seen_names: set[str] = set()
+    seeds: list[tuple[int, int, str, str]] = []
+    files: dict[str, str] = {}
+    for s, split in enumerate(recipe.splits):
+        if split.name in seen_names:
+            raise RecipeError(
+                f"{source}: splits[{s}].name: expected a unique split name, found {split.name!r} twice"
+            )
+        seen_names.add(split.name)
+        for k, src in enumerate(split.sources):
+            key = f"splits[{s}].sources[{k}]"
+            if isinstance(src, ProceduralSource):
+                lo, hi = src.seed, src.seed + src.count - 1
+                for a, b, other, okey in seeds:
+                    if other != split.name and lo <= b and a <= hi:
+                        raise RecipeError(
+                            f"{source}: {key}.seed: expected procedural seeds disjoint from split {other!r} "
+                            f"({okey}: seeds {a}..{b}), found seeds {lo}..{hi}"
+                        )
+                seeds.append((lo, hi, split.name, key))
+            else:
+                for p in src.paths:
+                    norm = str(Path(p))
+                    if files.get(norm, split.name) != split.name:
+                        raise RecipeError(
+                            f"{source}: {key}.paths: expected motion files disjoint across splits, found {p!r} "
+                            f"in splits {files[norm]!r} and {split.name!r}"
+                        )
+                    files[norm] = split.name
+
+
+def _check_registered(recipe: GenerateRecipe, source: str) -> None:
+    """Augmentation names and parameters are registered; procedural kinds exist (when that module is present)."""
+    from gttdata.augment import validate_augmentation
+
+    for i, aug in enumerate(recipe.augmentations):
+        problem = validate_augmentation(aug.name, aug.params, level="capture")
+        if problem:
+            raise RecipeError(f"{source}: augmentations[{i}].{problem}")
+    try:
+        from gttdata.mocap.procedural import PROCEDURAL_KINDS
+    except ImportError:  # the procedural module is optional at validation time
+        return
+    for s, split in enumerate(recipe.splits):
+        for k, src in enumerate(split.sources):
+            for kind in getattr(src, "kinds", ()):
+                if kind not in PROCEDURAL_KINDS:
+                    raise RecipeError(
+                        f"{source}: splits[{s}].sources[{k}].kinds: expected kinds among "
+                        f"{', '.join(PROCEDURAL_KINDS)}, found {kind!r}"
+                    )
+
+
+def parse_recipe(data: dict | None, *, source: str = "<recipe>") -> GenerateRecipe:
+    """Build and validate a recipe from a plain mapping (as loaded from YAML).
+
+    Raises:
+        RecipeError: One line naming ``source``, the key, the expected type or range and the value found.
+    """
+    recipe = build_dataclass(GenerateRecipe, data, "", source)
+    _check_splits(recipe, source)
+    _check_registered(recipe, source)
+    return recipe
+
+
+def load_recipe(path: str | Path, overrides: Sequence[str] = ()) -> GenerateRecipe:
+    """Read a YAML recipe, apply ``key.sub=value`` overrides, and validate everything before any work.
+
+    Args:
+        path: The YAML file.
+        overrides: Strings like ``capture.sigma_px=4`` or ``splits.train.n_samples=10``; each value is
+            parsed as a YAML scalar (or flow collection, e.g. ``capture.fps_hz=[30,15]``).
+
+    Returns:
+        The validated recipe.
+
+    Raises:
+        RecipeError: e.g. ``recipe.yaml: capture.sigma_px: expected a number >= 0 or a distribution, found 'abc'``.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError as exc:
+        raise RecipeError(f"{source}: recipe file not found") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        raise RecipeError(f"{source}: {where}not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise RecipeError(
+            f"{source}: <top>: expected a mapping of recipe sections, found {type(data).__name__}"
+        )
+    return parse_recipe(apply_overrides(data, overrides, source), source=source)
+
+
+def recipe_to_dict(recipe: GenerateRecipe) -> dict:
+    """The full recipe (defaults included) as plain data; ``parse_recipe`` of it gives back an equal recipe."""
+    return to_plain(recipe)
+
+
+def recipe_hash(recipe: GenerateRecipe) -> str:
+    """SHA-256 hex digest of the canonical JSON of :func:`recipe_to_dict` (sorted keys, no spaces)."""
+    text = json.dumps(recipe_to_dict(recipe), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()

@@ -1,0 +1,258 @@
+"""Strict conversion of a YAML mapping into recipe dataclasses, raising one-line RecipeErrors."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import types
+import typing
+from collections.abc import Sequence
+
+import yaml
+
+from gttdata.errors import RecipeError
+from gttdata.recipe.param import Param
+
+__all__ = ["apply_overrides", "build_dataclass", "to_plain"]
+
+_DIST_KINDS = ("uniform", "choice", "normal")
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _range_text(meta: dict) -> str:
+    parts = [
+        f"{op} {meta[k]}" for k, op in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")) if k in meta
+    ]
+    return " and ".join(parts)
+
+
+def _in_range(v: float, meta: dict) -> bool:
+    return (
+        ("ge" not in meta or v >= meta["ge"])
+        and ("gt" not in meta or v > meta["gt"])
+        and ("le" not in meta or v <= meta["le"])
+        and ("lt" not in meta or v < meta["lt"])
+    )
+
+
+def _number_text(meta: dict) -> str:
+    word = "an integer" if meta.get("integer") else "a number"
+    rng = _range_text(meta)
+    return f"{word} {rng}" if rng else word
+
+
+class _Ctx:
+    """Where the values come from, for error messages."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, key: str, expected: str, found: object) -> RecipeError:
+        return RecipeError(f"{self.source}: {key}: expected {expected}, found {found!r}")
+
+
+def _check_number(ctx: _Ctx, key: str, v: object, meta: dict, expected: str) -> float:
+    if not _is_number(v) or not _in_range(v, meta):
+        raise ctx.fail(key, expected, v)
+    if meta.get("integer") and float(v) != int(v):
+        raise ctx.fail(key, expected, v)
+    return int(v) if meta.get("integer") else float(v)
+
+
+def _convert_param(ctx: _Ctx, key: str, v: object, meta: dict) -> Param:
+    num = _number_text(meta)
+    expected = f"{num} or a distribution" + (" or a list of them" if meta.get("allow_list") else "")
+    kw = {
+        "integer": bool(meta.get("integer")),
+        "lo": meta.get("ge", meta.get("gt")),
+        "hi": meta.get("le", meta.get("lt")),
+    }
+    if _is_number(v):
+        return Param("value", (_check_number(ctx, key, v, meta, expected),), **kw)
+    if isinstance(v, list) and meta.get("allow_list"):
+        if not v:
+            raise ctx.fail(key, f"a non-empty list of {num}", v)
+        return Param("list", tuple(_check_number(ctx, key, x, meta, f"a list of {num}") for x in v), **kw)
+    if not (isinstance(v, dict) and len(v) == 1 and next(iter(v)) in _DIST_KINDS):
+        raise ctx.fail(key, expected, v)
+    kind, args = next(iter(v.items()))
+    sub = f"{key}.{kind}"
+    if kind == "uniform":
+        if (
+            not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args))
+            or args[0] > args[1]
+        ):
+            raise ctx.fail(sub, "[a, b] with a <= b", args)
+        args = [_check_number(ctx, sub, a, meta, f"bounds that are each {num}") for a in args]
+    elif kind == "choice":
+        if not (isinstance(args, list) and args):
+            raise ctx.fail(sub, f"a non-empty list of {num}", args)
+        args = [_check_number(ctx, sub, a, meta, f"options that are each {num}") for a in args]
+    else:
+        if (
+            not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args))
+            or args[1] < 0
+        ):
+            raise ctx.fail(sub, "[mu, sigma] with sigma >= 0", args)
+        _check_number(ctx, sub, args[0], {**meta, "integer": False}, f"a mean that is {num}")
+        args = [float(a) for a in args]
+    return Param(kind, tuple(args), **kw)
+
+
+def _convert_scalar(ctx: _Ctx, key: str, tp: type, v: object, meta: dict) -> object:
+    if tp is bool:
+        if not isinstance(v, bool):
+            raise ctx.fail(key, "true or false", v)
+        return v
+    if tp is int:
+        return _check_number(ctx, key, v, {**meta, "integer": True}, _number_text({**meta, "integer": True}))
+    if tp is float:
+        return float(_check_number(ctx, key, v, meta, _number_text(meta)))
+    if tp is str:
+        choices = meta.get("choices")
+        if choices is not None:
+            if v not in choices:
+                raise ctx.fail(key, "one of " + ", ".join(repr(c) for c in choices), v)
+        elif not isinstance(v, str) or (meta.get("nonempty") and not v):
+            raise ctx.fail(key, "a non-empty string" if meta.get("nonempty") else "a string", v)
+        elif meta.get("pattern") and not re.match(meta["pattern"], v):
+            raise ctx.fail(key, "a name of letters, digits, '_', '.', '-'", v)
+        return v
+    if tp is dict:
+        if not (isinstance(v, dict) and all(isinstance(k, str) for k in v)):
+            raise ctx.fail(key, "a mapping of names to values", v)
+        return dict(v)
+    raise TypeError(f"recipe field {key}: unsupported type {tp!r}")
+
+
+def _convert_union(ctx: _Ctx, key: str, members: tuple, v: object) -> object:
+    """A union of dataclasses told apart by their ``kind`` field (first member when ``kind`` is absent)."""
+    kinds = {m.__dataclass_fields__["kind"].default: m for m in members}
+    if not isinstance(v, dict):
+        raise ctx.fail(key, "a mapping with 'kind' one of " + ", ".join(repr(k) for k in kinds), v)
+    kind = v.get("kind", next(iter(kinds)))
+    if kind not in kinds:
+        raise ctx.fail(f"{key}.kind", "one of " + ", ".join(repr(k) for k in kinds), kind)
+    return build_dataclass(kinds[kind], v, key, ctx)
+
+
+def _convert(ctx: _Ctx, key: str, tp: object, v: object, meta: dict) -> object:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        rest = tuple(a for a in args if a is not type(None))
+        if v is None and len(rest) < len(args):
+            return None
+        if len(rest) == 1:
+            return _convert(ctx, key, rest[0], v, meta)
+        return _convert_union(ctx, key, rest, v)
+    if tp is Param:
+        return _convert_param(ctx, key, v, meta)
+    if dataclasses.is_dataclass(tp):
+        return build_dataclass(tp, v, key, ctx)
+    if origin is tuple:
+        if not isinstance(v, list | tuple):
+            raise ctx.fail(key, "a list", v)
+        if len(args) == 2 and args[1] is Ellipsis:
+            if meta.get("nonempty") and not v:
+                raise ctx.fail(key, "a non-empty list", v)
+            return tuple(_convert(ctx, f"{key}[{i}]", args[0], x, {}) for i, x in enumerate(v))
+        if len(v) != len(args):
+            raise ctx.fail(key, f"a list of {len(args)} values", v)
+        return tuple(
+            _convert(ctx, f"{key}[{i}]", a, x, meta) for i, (a, x) in enumerate(zip(args, v, strict=True))
+        )
+    return _convert_scalar(ctx, key, tp, v, meta)
+
+
+def build_dataclass(cls: type, data: object, key: str, ctx: _Ctx | str) -> object:
+    """Build ``cls`` from a mapping, checking every key, type and range.
+
+    Args:
+        cls: A recipe dataclass.
+        data: The YAML mapping (None means all defaults).
+        key: Dotted key of ``data`` in the recipe (``""`` at the top).
+        ctx: The recipe's file name (or a context carrying it).
+
+    Raises:
+        RecipeError: One line naming the file, the key, what was expected and what was found.
+    """
+    ctx = _Ctx(ctx) if isinstance(ctx, str) else ctx
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise ctx.fail(key or "<top>", f"a mapping of {cls.__name__} fields", data)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    for k in data:
+        if k not in fields:
+            where = f"{key}.{k}" if key else str(k)
+            raise RecipeError(f"{ctx.source}: {where}: unknown key (expected one of: {', '.join(fields)})")
+    values = {}
+    for name, f in fields.items():
+        sub = f"{key}.{name}" if key else name
+        if name in data:
+            values[name] = _convert(ctx, sub, hints[name], data[name], dict(f.metadata))
+        elif f.metadata.get("nonempty"):
+            raise ctx.fail(sub, "a value (this key is required)", None)
+    return cls(**values)
+
+
+def to_plain(obj: object) -> object:
+    """A recipe object as plain YAML/JSON data (dicts, lists, numbers, strings)."""
+    if isinstance(obj, Param):
+        return obj.to_yaml()
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple | list):
+        return [to_plain(x) for x in obj]
+    if isinstance(obj, dict):
+        return {str(k): to_plain(v) for k, v in obj.items()}
+    return obj
+
+
+def apply_overrides(data: dict, overrides: Sequence[str], source: str) -> dict:
+    """Apply ``key.sub=value`` overrides (values parsed as YAML scalars) to a raw recipe mapping.
+
+    A list is indexed by position (``splits.0``) or by an element's ``name`` (``splits.train``).
+    """
+    for ov in overrides:
+        key, sep, text = ov.partition("=")
+        if not sep or not key.strip():
+            raise RecipeError(f"{source}: override {ov!r}: expected key.sub=value")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise RecipeError(f"{source}: override {key}: value {text!r} is not valid YAML ({exc})") from exc
+        node: object = data
+        parts = key.strip().split(".")
+        for i, part in enumerate(parts):
+            last = i == len(parts) - 1
+            where = ".".join(parts[: i + 1])
+            if isinstance(node, list):
+                idx = next(
+                    (j for j, x in enumerate(node) if isinstance(x, dict) and x.get("name") == part), None
+                )
+                if idx is None and part.isdigit() and int(part) < len(node):
+                    idx = int(part)
+                if idx is None:
+                    raise RecipeError(
+                        f"{source}: override {where}: no list element named or numbered {part!r}"
+                    )
+                if last:
+                    node[idx] = value
+                else:
+                    node = node[idx]
+            elif isinstance(node, dict):
+                if last:
+                    node[part] = value
+                else:
+                    if not isinstance(node.get(part), dict | list):
+                        node[part] = {}
+                    node = node[part]
+            else:
+                raise RecipeError(
+                    f"{source}: override {where}: cannot set a key inside a {type(node).__name__}"
+                )
+    return data
