@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import zipfile
 from pathlib import Path
 
 import h5py
@@ -122,7 +123,7 @@ def load_npz(path: str | Path) -> Motion:
     try:
         with np.load(path, allow_pickle=False) as z:
             fields = {k: z[k] for k in z.files}
-    except (ValueError, OSError, EOFError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise MotionFormatError(f"{path}: not a readable .npz archive ({exc})") from exc
     return _build(path, "npz", fields)
 

@@ -4,7 +4,8 @@ Conventions:
     * Joints are the markers, named by their ``POINT:LABELS`` (a subject prefix shared by every
       label, such as ``Nick01:``, is stripped); every parent is -1 (markers have no hierarchy).
     * Units from ``POINT:UNITS`` (``mm``, ``cm`` or ``m``) are converted to metres.
-    * A sample with a negative residual is missing; gaps are filled by linear interpolation over
+    * A sample with a negative residual is missing (the ``c3d`` package also reads non-finite
+      coordinates that way); gaps are filled by linear interpolation over
       time (the nearest valid sample is held before the first and after the last). A marker
       missing in every frame is dropped with a warning.
     * Axes: C3D has no fixed up axis. ``up_axis="auto"`` picks the axis along which the markers'
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 import warnings
 from pathlib import Path
 
@@ -84,7 +86,7 @@ def read_c3d_points(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str]
                 frames.append(np.array(points[:, :4], dtype=np.float64))
         except MotionFormatError:
             raise
-        except (ValueError, KeyError, IndexError, OSError, AssertionError, EOFError) as exc:
+        except (ValueError, KeyError, IndexError, OSError, AssertionError, EOFError, struct.error) as exc:
             raise MotionFormatError(f"{path}: not a readable C3D file ({type(exc).__name__}: {exc})") from exc
     if not frames:
         raise MotionFormatError(f"{path}: found zero frames; expected at least 1")

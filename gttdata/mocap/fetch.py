@@ -21,7 +21,7 @@ from pathlib import Path
 
 from gttdata.errors import GttDataError
 
-__all__ = ["MOTION_FILES", "MotionFile", "default_cache_dir", "fetch_motions", "list_cached"]
+__all__ = ["MOTION_FILES", "SYSTEM_ROOT", "MotionFile", "default_cache_dir", "fetch_motions", "list_cached"]
 
 _log = logging.getLogger(__name__)
 
@@ -52,6 +52,9 @@ MOTION_FILES: tuple[MotionFile, ...] = (
     MotionFile("nick_freeform_001.c3d", "dart-doc", f"{_C3D_DIR}/nick_freeform_001.c3d"),
     MotionFile("squat.c3d", "dart-doc", f"{_C3D_DIR}/squat.c3d"),
 )
+
+#: Root of the installed system tree searched for packaged copies (tests point it elsewhere).
+SYSTEM_ROOT = Path("/")
 
 _MOTION_SUFFIXES = (".bvh", ".c3d", ".amc", ".asf", ".npz", ".h5", ".hdf5")
 
@@ -111,14 +114,14 @@ def _unpack_package(package: str, workdir: Path) -> Path:
 def fetch_motions(
     dest: str | Path | None = None,
     *,
-    system_root: str | Path = "/",
+    system_root: str | Path | None = None,
     files: tuple[MotionFile, ...] = MOTION_FILES,
 ) -> list[Path]:
     """Make every file of ``files`` present in ``dest``; files already there are kept (idempotent).
 
     Args:
         dest: Cache directory; defaults to :func:`default_cache_dir`.
-        system_root: Where installed packages live (tests point it at a fake tree).
+        system_root: Where installed packages live; defaults to :data:`SYSTEM_ROOT`.
         files: Which files to fetch.
 
     Returns:
@@ -133,7 +136,8 @@ def fetch_motions(
     for f in files:
         if f not in todo:
             _log.info("%s: already cached", f.name)
-    todo = [f for f in todo if not _copy_member(Path(system_root), f.member, dest / f.name)]
+    root = Path(system_root) if system_root is not None else SYSTEM_ROOT
+    todo = [f for f in todo if not _copy_member(root, f.member, dest / f.name)]
     for package in dict.fromkeys(f.package for f in todo):
         with tempfile.TemporaryDirectory(prefix="gtt-fetch-") as tmp:
             root = _unpack_package(package, Path(tmp))
