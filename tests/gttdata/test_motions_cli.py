@@ -1,0 +1,190 @@
+"""Tests for ``gttdata motions`` (fetch, list, show) and the Debian fetcher behind it, with fake packages."""
+
+from __future__ import annotations
+
+import gzip
+import os
+import shutil
+import stat
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gttdata.cli import main
+from gttdata.errors import GttDataError
+from gttdata.mocap import fetch
+from gttdata.mocap.fetch import MOTION_FILES, fetch_motions, list_cached
+
+_TINY_BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT Head
+  {
+    OFFSET 0 170 0
+    CHANNELS 3 Zrotation Yrotation Xrotation
+    End Site
+    {
+      OFFSET 0 10 0
+    }
+  }
+}
+MOTION
+Frames: 3
+Frame Time: 0.04
+0 0 0 0 0 0 0 0 0
+10 0 0 0 0 0 0 0 0
+20 0 0 0 0 0 0 0 0
+"""
+
+
+def _content(name: str) -> bytes:
+    return _TINY_BVH.encode() if name.endswith(".bvh") else f"c3d bytes of {name}".encode()
+
+
+def _fake_tree(root: Path, *, gzip_c3d: bool) -> Path:
+    """Lay out the packaged files under ``root`` as the Debian packages do (C3D optionally gzipped)."""
+    for f in MOTION_FILES:
+        target = root / f.member
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if gzip_c3d and f.name.endswith(".c3d"):
+            target.with_name(target.name + ".gz").write_bytes(gzip.compress(_content(f.name)))
+        else:
+            target.write_bytes(_content(f.name))
+    return root
+
+
+@pytest.fixture
+def fake_apt(tmp_path, monkeypatch) -> Path:
+    """A PATH with a fake ``apt-get`` that "downloads" .deb files built here with the real dpkg-deb."""
+    if shutil.which("dpkg-deb") is None:
+        pytest.skip("dpkg-deb is not installed")
+    debs = tmp_path / "debs"
+    debs.mkdir()
+    for package in ("assimp-testmodels", "dart-doc"):
+        tree = tmp_path / "build" / package
+        _fake_tree(tree, gzip_c3d=True)
+        for f in MOTION_FILES:  # keep only this package's files
+            if f.package != package:
+                for p in (tree / f.member, tree / (f.member + ".gz")):
+                    p.unlink(missing_ok=True)
+        (tree / "DEBIAN").mkdir()
+        (tree / "DEBIAN" / "control").write_text(
+            f"Package: {package}\nVersion: 1.0\nArchitecture: all\nMaintainer: t <t@example.org>\nDescription: fake\n"
+        )
+        subprocess.run(["dpkg-deb", "--build", "--root-owner-group", str(tree), str(debs / f"{package}_1.0_all.deb")],
+                       check=True, capture_output=True)  # fmt: skip
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    apt = bin_dir / "apt-get"
+    apt.write_text(f'#!/bin/sh\n[ "$1" = download ] || exit 2\ncp "{debs}/$2"_*.deb . \n')
+    apt.chmod(apt.stat().st_mode | stat.S_IEXEC)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setattr(fetch, "SYSTEM_ROOT", tmp_path / "empty-root")
+    return bin_dir
+
+
+@pytest.mark.parametrize("gzip_c3d", [False, True])
+def test_fetch_from_installed_tree_is_idempotent(tmp_path, gzip_c3d):
+    root = _fake_tree(tmp_path / "sys", gzip_c3d=gzip_c3d)
+    dest = tmp_path / "cache"
+    paths = fetch_motions(dest, system_root=root)
+    assert [p.name for p in paths] == [f.name for f in MOTION_FILES]
+    for p in paths:
+        assert p.read_bytes() == _content(p.name)
+    (dest / "squat.c3d").write_bytes(b"kept")  # a second run must not touch cached files
+    shutil.rmtree(root)
+    fetch_motions(dest, system_root=root)
+    assert (dest / "squat.c3d").read_bytes() == b"kept"
+    assert not list(dest.glob("*.tmp"))
+
+
+def test_fetch_downloads_with_apt_and_unpacks_gz(tmp_path, fake_apt):
+    dest = tmp_path / "cache"
+    paths = fetch_motions(dest)
+    for p in paths:
+        assert p.read_bytes() == _content(p.name)
+    assert list_cached(dest) == sorted(paths)
+
+
+def test_fetch_without_apt_is_one_clear_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.setattr(fetch, "SYSTEM_ROOT", tmp_path / "empty-root")
+    with pytest.raises(GttDataError, match="apt-get not found") as e:
+        fetch_motions(tmp_path / "cache")
+    assert "\n" not in str(e.value)
+
+
+def test_fetch_apt_failure_reports_its_message(tmp_path, monkeypatch):
+    if shutil.which("dpkg-deb") is None:
+        pytest.skip("dpkg-deb is not installed")
+    apt = tmp_path / "apt-get"
+    apt.write_text("#!/bin/sh\necho 'E: Unable to locate package' >&2\nexit 100\n")
+    apt.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{tmp_path}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setattr(fetch, "SYSTEM_ROOT", tmp_path / "empty-root")
+    result = CliRunner().invoke(main, ["motions", "fetch", "--dest", str(tmp_path / "cache")])
+    assert result.exit_code == 1
+    assert "apt-get download assimp-testmodels' failed (E: Unable to locate package)" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_cli_fetch_list_show(tmp_path, fake_apt, monkeypatch):
+    cache = tmp_path / "gtt-cache"
+    monkeypatch.setenv("GTT_CACHE", str(cache))
+    runner = CliRunner()
+    r = runner.invoke(main, ["motions", "list"])
+    assert r.exit_code == 0 and "no motion files" in r.output
+    r = runner.invoke(main, ["motions", "fetch"])
+    assert r.exit_code == 0, r.output
+    assert r.output.split() == [str(cache / f.name) for f in MOTION_FILES]
+    r = runner.invoke(main, ["motions", "list"])
+    assert r.exit_code == 0 and r.output.count("\n") == len(MOTION_FILES)
+    # By cache name; the tiny clip: 3 frames at 25 Hz, 2 joints, head 1.7 m above the hips.
+    r = runner.invoke(main, ["motions", "show", "01_01.bvh", "--scale", "0.01"])
+    assert r.exit_code == 0, r.output
+    for expected in (
+        "frames: 3",
+        "fps: 25",
+        "joints: 2",
+        "duration: 0.08 s",
+        "x 200 mm",
+        "standing height: 1.70 m",
+    ):
+        assert expected in r.output
+
+
+@pytest.mark.parametrize(
+    ("args", "exit_code", "expected"),
+    [
+        (["show", "{d}/clip.bvh", "--scale", "1"], 0, "frames: 3"),
+        (["show", "{d}/clip.bvh", "--format", "bvh"], 0, "standing height: 1.70 m"),
+        (["show", "{d}/clip.bvh", "--format", "c3d"], 1, "not a readable C3D file"),
+        (["show", "{d}/clip.bvh", "--format", "xyz"], 1, "unknown motion format 'xyz'"),
+        (["show", "{d}/missing.bvh"], 1, "motion file not found"),
+        (["show", "{d}/bad.bvh"], 1, "line 17: expected 'Frames:"),
+    ],
+)
+def test_cli_show_cases(tmp_path, args, exit_code, expected):
+    (tmp_path / "clip.bvh").write_text(_TINY_BVH)
+    (tmp_path / "bad.bvh").write_text(_TINY_BVH.replace("Frames: 3", "Frame 3"))
+    r = CliRunner().invoke(main, ["motions", *[a.format(d=tmp_path) for a in args]])
+    assert r.exit_code == exit_code, r.output
+    assert expected in r.output
+    if exit_code:
+        assert len(r.output.strip().splitlines()) == 1
+
+
+@pytest.mark.mocap
+def test_cli_show_real_cmu_clip(mocap_dir):
+    r = CliRunner().invoke(main, ["motions", "show", str(mocap_dir / "01_01.bvh")])
+    assert r.exit_code == 0, r.output
+    for expected in ("frames: 2752", "fps: 120", "joints: 31 (skeleton cmu31)", "duration: 22.93 s"):
+        assert expected in r.output
+    height = float(r.output.split("standing height: ")[1].split(" m")[0])
+    assert 1.3 < height < 1.9
+    assert np.isfinite(height)
