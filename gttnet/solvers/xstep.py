@@ -1,0 +1,364 @@
+"""The DLOE X-step: 3D structure from an affinity graph and the viewing rays, as a differentiable solve."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import torch
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from gttnet.solvers._system import SingularStructureError, build_system, solve_dense, solve_sparse
+
+__all__ = [
+    "DLOESolver",
+    "SingularStructureError",
+    "laplacians",
+    "noise_aware_lambda2",
+    "solve_structure",
+    "solve_structure_dense",
+    "structure_energy",
+]
+
+log = logging.getLogger(__name__)
+
+_METHODS = ("auto", "dense", "sparse")
+#: N from which ``method="auto"`` uses the sparse CPU path (measured by benchmarks/bench_xstep.py).
+SPARSE_FROM_N = 200
+
+
+def laplacians(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Out-degree and symmetrised Laplacians of an affinity.
+
+    Args:
+        A: Non-negative affinity, shape ``(..., N, N)``; row n holds the weights of image n's links.
+
+    Returns:
+        ``(L_out, L_sym)``: ``diag(A 1) - A`` and ``diag((A + A^T) 1) - (A + A^T)``, shape ``(..., N, N)``.
+
+    Example:
+        >>> L_out, L_sym = laplacians(torch.tensor([[0.0, 1.0], [0.0, 0.0]]))
+        >>> L_out.tolist(), L_sym.tolist()
+        ([[1.0, -1.0], [0.0, 0.0]], [[1.0, -1.0], [-1.0, 1.0]])
+    """
+    S = A + A.transpose(-1, -2)
+    L_out = torch.diag_embed(A.sum(-1)) - A
+    L_sym = torch.diag_embed(S.sum(-1)) - S
+    return L_out, L_sym
+
+
+def _structure_matrix(A: torch.Tensor, lambda1: float) -> torch.Tensor:
+    """``M = L_out^T L_out + lambda1 L_sym``: the Laplacian part of the objective, per coordinate."""
+    L_out, L_sym = laplacians(A)
+    return L_out.transpose(-1, -2) @ L_out + lambda1 * L_sym
+
+
+def noise_aware_lambda2(sigma_px: float, f_px: float, depth_m: float, *, prior_std_m: float = 2e-3) -> float:
+    """A finite ray weight lambda2 from the 2-D noise level (maximum a posteriori reasoning).
+
+    A pixel error of ``sigma_px`` moves a point at ``depth_m`` off its ray by about
+    ``s = sigma_px * depth_m / f_px`` metres per image axis; the Laplacian residual ``L_out x`` of the
+    true motion has a per-coordinate std of about ``prior_std_m`` (for a binary temporal chain at the
+    paper's 120 Hz global rate the synthetic scenes give 1-3 mm). Reading both terms as Gaussian
+    negative log-likelihoods and scaling by ``prior_std_m**2`` gives ``lambda2 = (prior_std_m / s)**2``.
+    For affinities whose rows are not O(1) (e.g. soft-max weights), scale ``prior_std_m`` by the row sum.
+
+    Args:
+        sigma_px: Std of the 2-D keypoint noise, pixels (> 0).
+        f_px: Focal length, pixels.
+        depth_m: Typical camera-to-subject distance, metres.
+        prior_std_m: Std of the Laplacian residual of the true motion, metres.
+
+    Returns:
+        lambda2 (dimensionless, same units as the Laplacian terms).
+
+    Example:
+        >>> round(noise_aware_lambda2(1.0, 1000.0, 3.0, prior_std_m=3e-3), 6)
+        1.0
+    """
+    if sigma_px <= 0 or f_px <= 0 or depth_m <= 0 or prior_std_m <= 0:
+        raise ValueError(
+            f"sigma_px, f_px, depth_m and prior_std_m must be > 0, got {sigma_px}, {f_px}, {depth_m}, {prior_std_m}"
+        )
+    s = sigma_px * depth_m / f_px
+    return float((prior_std_m / s) ** 2)
+
+
+def _as_inputs(A, centers, rays, visible, x_prior):
+    """Validate and convert to tensors on A's device and dtype, all with a leading batch axis."""
+    if not torch.is_tensor(A):
+        raise TypeError(f"A must be a torch tensor, got {type(A).__name__}")
+    if A.ndim not in (2, 3) or A.shape[-1] != A.shape[-2]:
+        raise ValueError(f"A must have shape (N, N) or (B, N, N), got {tuple(A.shape)}")
+    batched = A.ndim == 3
+    kw = {"dtype": A.dtype, "device": A.device}
+    C = torch.as_tensor(centers, **kw)
+    r = torch.as_tensor(rays, **kw)
+    vis = torch.as_tensor(visible, device=A.device).bool()
+    n = A.shape[-1]
+    j = vis.shape[-1]
+    if C.shape[-2:] != (n, 3) or r.shape[-3:] != (n, j, 3) or vis.shape[-2:] != (n, j):
+        raise ValueError(
+            f"expected centers (N, 3), rays (N, J, 3), visible (N, J) with N={n} from A; got "
+            f"{tuple(C.shape)}, {tuple(r.shape)}, {tuple(vis.shape)}"
+        )
+    if C.ndim == 3 or r.ndim == 4 or vis.ndim == 3:
+        batched = True
+    b = max(
+        A.shape[0] if A.ndim == 3 else 1, C.shape[0] if C.ndim == 3 else 1, r.shape[0] if r.ndim == 4 else 1
+    )
+    A3 = A.expand(b, n, n) if A.ndim == 3 else A.unsqueeze(0).expand(b, n, n)
+    C3 = C.expand(b, n, 3) if C.ndim == 3 else C.unsqueeze(0).expand(b, n, 3)
+    r4 = r.expand(b, n, j, 3) if r.ndim == 4 else r.unsqueeze(0).expand(b, n, j, 3)
+    v3 = vis.expand(b, n, j) if vis.ndim == 3 else vis.unsqueeze(0).expand(b, n, j)
+    r4 = torch.where(v3.unsqueeze(-1), r4, torch.zeros((), **kw))
+    xp = None
+    if x_prior is not None:
+        xp = torch.as_tensor(x_prior, **kw)
+        xp = xp.expand(b, n, j, 3) if xp.ndim == 4 else xp.unsqueeze(0).expand(b, n, j, 3)
+    if not (torch.isfinite(A).all() and torch.isfinite(C).all() and torch.isfinite(r4).all()):
+        raise ValueError("A, centers and the visible rays must be finite")
+    return A3, C3, r4, v3, xp, batched
+
+
+def _check_solvable(A: torch.Tensor, rays: torch.Tensor, vis: torch.Tensor, lambda1: float) -> None:
+    """Raise SingularStructureError where a graph component does not pin down a joint.
+
+    A component of the (undirected) link graph fixes joint p only if its observed rays of p span at
+    least two directions; otherwise the solution can slide (translation / depth) at zero cost.
+    """
+    if lambda1 == 0:
+        log.debug("lambda1 = 0: solvability checked on undirected components, which may be optimistic")
+    Ab = (A.detach() != 0).cpu().numpy()
+    r = rays.detach().double().cpu().numpy()
+    v = vis.cpu().numpy()
+    for b in range(Ab.shape[0]):
+        ncomp, label = connected_components(csr_matrix(Ab[b] | Ab[b].T), directed=False)
+        rr = np.where(v[b][..., None], r[b], 0.0)
+        S = np.zeros((ncomp, r.shape[2], 3, 3))
+        np.add.at(S, label, np.einsum("nja,njb->njab", rr, rr))
+        tr = np.trace(S, axis1=-2, axis2=-1)
+        e2 = 0.5 * (tr**2 - np.sum(S * S, axis=(-2, -1)))
+        bad = np.argwhere(e2 <= 1e-10)
+        if bad.size:
+            c, p = bad[0]
+            size = int(np.sum(label == c))
+            raise SingularStructureError(
+                f"X-step is singular: joint {p} is observed along fewer than two ray directions in a linked "
+                f"component of {size} images (batch {b}); pass x_prior (e.g. X_init) to regularise"
+            )
+
+
+def _solve(A, centers, rays, visible, *, lambda1, lambda2, method, x_prior, prior_weight) -> torch.Tensor:
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    if lambda1 < 0 or (lambda2 is not None and lambda2 <= 0):
+        raise ValueError(f"need lambda1 >= 0 and lambda2 > 0 (or None), got {lambda1}, {lambda2}")
+    A3, C, r, vis, xp, batched = _as_inputs(A, centers, rays, visible, x_prior)
+    if (A3.detach() < 0).any():
+        raise ValueError("A must be non-negative")
+    if xp is None:
+        _check_solvable(A3, r, vis, lambda1)
+    M = _structure_matrix(A3, lambda1)
+    with torch.no_grad():
+        eps = (
+            prior_weight * (torch.diagonal(M, dim1=-2, dim2=-1).mean(-1) + 1e-12) if xp is not None else None
+        )
+    sys = build_system(C, r, vis, lambda2=lambda2, x_prior=xp, eps=eps)
+    n = A3.shape[-1]
+    if method == "auto":
+        needs_geom_grad = torch.is_grad_enabled() and (r.requires_grad or C.requires_grad)
+        method = (
+            "sparse" if (A3.device.type == "cpu" and n >= SPARSE_FROM_N and not needs_geom_grad) else "dense"
+        )
+    X = solve_sparse(M, sys) if method == "sparse" else solve_dense(M, sys)
+    return X if batched else X[0]
+
+
+def solve_structure(
+    A: torch.Tensor,
+    centers,
+    rays,
+    visible,
+    *,
+    lambda1: float = 0.1,
+    lambda2: float | None = None,
+    method: str = "auto",
+    x_prior=None,
+    prior_weight: float = 1e-6,
+) -> torch.Tensor:
+    """Structure X minimising the DLOE objective for a given affinity (REFERENCE.md, "The DLOE X-step").
+
+    Per joint and coordinate c: ``|L_out x_c|^2 + lambda1 x_c^T L_sym x_c`` plus
+    ``lambda2 sum_n |(I - r r^T)(X_n - C_n)|^2`` over observed images (all terms / (N J), which does
+    not move the minimiser). ``lambda2=None`` is the pinned limit: observed joints are ``C_n + d r_n``
+    and the exact minimiser is found over the depths d (one unknown per observed joint, three per missing
+    joint, which the Laplacian terms fill). A finite lambda2 solves the full 3N system per joint,
+    letting points leave their rays (see :func:`noise_aware_lambda2`).
+
+    ``method``: ``"dense"`` batches one Cholesky solve per joint (and per batch item) with torch.linalg;
+    ``"sparse"`` assembles each joint's system sparsely and factorises it with SuperLU on CPU in float64
+    (differentiable w.r.t. A through a custom backward, not w.r.t. rays or centres); ``"auto"`` uses
+    sparse on CPU from N = :data:`SPARSE_FROM_N`, dense otherwise. Gradients flow to ``A``.
+
+    A unique solution needs every joint observed along two or more ray directions in every linked
+    component of the graph. Without ``x_prior`` this is checked and :class:`SingularStructureError` is
+    raised. With ``x_prior`` a ridge ``eps |X - x_prior|^2`` is added to every image and joint, with
+    ``eps = prior_weight * mean(diag(M))`` (M the Laplacian part; treated as a constant in backward),
+    small enough to leave well-posed solutions unchanged to ~``prior_weight`` relative.
+
+    Args:
+        A: Affinity, shape ``(N, N)`` or ``(B, N, N)``, non-negative; row n weights image n's links.
+        centers: Camera centre of each image in world, metres, shape ``(N, 3)`` or ``(B, N, 3)``.
+        rays: Unit viewing rays in world, shape ``(N, J, 3)`` or ``(B, N, J, 3)``.
+        visible: Observed-joint mask, shape ``(N, J)`` or ``(B, N, J)``.
+        lambda1: Weight of the symmetric Laplacian term (0.1 in GTT-Net training, 0.0015 in DLOE).
+        lambda2: Ray weight; None for the pinned limit lambda2 -> inf.
+        method: ``"auto"``, ``"dense"`` or ``"sparse"``.
+        x_prior: Optional fallback structure (e.g. X_init), metres, shape ``(N, J, 3)`` or ``(B, N, J, 3)``.
+        prior_weight: Relative ridge weight toward ``x_prior``.
+
+    Returns:
+        X in world, metres, shape ``(N, J, 3)`` (``(B, N, J, 3)`` when any input is batched), A's dtype.
+
+    Raises:
+        SingularStructureError: If the solution is not unique and no ``x_prior`` is given.
+
+    Example:
+        >>> C = torch.tensor([[0.0, -1, 0], [0.0, 1, 0]])
+        >>> r = torch.tensor([[[0.0, 1, 1]], [[0.0, -1, 1]]]) / 2**0.5
+        >>> A = torch.tensor([[0.0, 1.0], [1.0, 0.0]])
+        >>> solve_structure(A, C, r, torch.ones(2, 1, dtype=torch.bool)).round(decimals=5).abs().tolist()
+        [[[0.0, 0.0, 1.0]], [[0.0, 0.0, 1.0]]]
+    """
+    return _solve(
+        A, centers, rays, visible, lambda1=lambda1, lambda2=lambda2, method=method, x_prior=x_prior,
+        prior_weight=prior_weight,
+    )  # fmt: skip
+
+
+def solve_structure_dense(
+    A: torch.Tensor, centers, rays, visible, *, lambda1: float = 0.1, lambda2: float = 1e10
+) -> torch.Tensor:
+    """Reference X-step as in the published code: a dense 3N x 3N solve per joint (slow; for tests).
+
+    Builds ``H = kron(M, I_3) + lambda2 blockdiag(P_n)`` with ``P_n = I - r r^T`` for observed joints and
+    solves ``H x = lambda2 [P_n C_n]`` by LU for every joint at once. With lambda2 = 1e10, H's condition
+    number is ~1e10 times that of M, so float64 keeps only ~5-6 significant digits.
+
+    Args:
+        A: Affinity, shape ``(N, N)`` or ``(B, N, N)``.
+        centers: Camera centres, metres, shape ``(N, 3)``.
+        rays: Unit rays, shape ``(N, J, 3)``.
+        visible: Observed-joint mask, shape ``(N, J)``.
+        lambda1: Weight of the symmetric Laplacian term.
+        lambda2: Ray weight.
+
+    Returns:
+        X in world, metres, shape ``(N, J, 3)`` or ``(B, N, J, 3)``.
+
+    Example:
+        >>> C = torch.tensor([[0.0, -1, 0], [0.0, 1, 0]], dtype=torch.float64)
+        >>> r = torch.tensor([[[0.0, 1, 1]], [[0.0, -1, 1]]], dtype=torch.float64) / 2**0.5
+        >>> A = torch.tensor([[0.0, 1.0], [1.0, 0.0]], dtype=torch.float64)
+        >>> X = solve_structure_dense(A, C, r, torch.ones(2, 1, dtype=torch.bool))
+        >>> bool(torch.allclose(X, torch.tensor([0.0, 0, 1], dtype=torch.float64), atol=1e-6))
+        True
+    """
+    A3, C, r, vis, _, batched = _as_inputs(A, centers, rays, visible, None)
+    b, n, j, _ = r.shape
+    M = _structure_matrix(A3, lambda1)  # (B, N, N)
+    eye = torch.eye(3, dtype=A3.dtype, device=A3.device)
+    P = (eye - r.unsqueeze(-1) * r.unsqueeze(-2)) * vis[..., None, None]  # (B, N, J, 3, 3)
+    P = P.permute(0, 2, 1, 3, 4)  # (B, J, N, 3, 3)
+    H = torch.kron(M, eye).unsqueeze(1).repeat(1, j, 1, 1)  # (B, J, 3N, 3N)
+    Hv = H.view(b, j, n, 3, n, 3)
+    idx = torch.arange(n, device=A3.device)
+    Hv[:, :, idx, :, idx, :] = Hv[:, :, idx, :, idx, :] + lambda2 * P.permute(2, 0, 1, 3, 4)
+    rhs = lambda2 * (P @ C.unsqueeze(1).unsqueeze(-1)).reshape(b, j, 3 * n, 1)
+    x = torch.linalg.solve(H, rhs).reshape(b, j, n, 3).transpose(1, 2)
+    return x if batched else x[0]
+
+
+def structure_energy(
+    A: torch.Tensor, X: torch.Tensor, *, lambda1: float = 0.1, centers=None, rays=None, visible=None,
+    lambda2: float | None = None,
+) -> torch.Tensor:  # fmt: skip
+    """The DLOE objective divided by N J; without rays it is the smoothness loss (paper's l^S).
+
+    Args:
+        A: Affinity, shape ``(N, N)`` or ``(B, N, N)``.
+        X: Structure in world, metres, shape ``(N, J, 3)`` or ``(B, N, J, 3)``.
+        lambda1: Weight of the symmetric Laplacian term.
+        centers: Camera centres, shape ``(N, 3)``; with ``rays``, ``visible`` and ``lambda2``, adds the ray term.
+        rays: Unit rays, shape ``(N, J, 3)``.
+        visible: Observed-joint mask, shape ``(N, J)``.
+        lambda2: Ray weight (required for the ray term).
+
+    Returns:
+        Energy, shape ``()`` or ``(B,)``.
+
+    Example:
+        >>> A = torch.tensor([[0.0, 1.0], [1.0, 0.0]])
+        >>> float(structure_energy(A, torch.zeros(2, 1, 3)))
+        0.0
+    """
+    L_out, L_sym = laplacians(A)
+    n, j = X.shape[-3], X.shape[-2]
+    x = X.flatten(-2)  # (..., N, 3J): every coordinate column at once
+    e = (L_out @ x).square().sum((-2, -1)) + lambda1 * (x * (L_sym @ x)).sum((-2, -1))
+    if rays is not None:
+        if lambda2 is None or centers is None or visible is None:
+            raise ValueError("the ray term needs centers, rays, visible and a finite lambda2")
+        r = torch.as_tensor(rays, dtype=X.dtype, device=X.device)
+        d = X - torch.as_tensor(centers, dtype=X.dtype, device=X.device).unsqueeze(-2)
+        perp = d - (d * r).sum(-1, keepdim=True) * r
+        vis = torch.as_tensor(visible, device=X.device).bool()
+        e = e + lambda2 * (perp.square().sum(-1) * vis).sum((-2, -1))
+    return e / (n * j)
+
+
+class DLOESolver(torch.nn.Module):
+    """The DLOE layer: affinity -> structure, differentiable w.r.t. the affinity.
+
+    Args:
+        lambda1: Weight of the symmetric Laplacian term (keep train and test identical).
+        lambda2: Ray weight; None pins observed joints to their rays.
+        method: Solver path, see :func:`solve_structure`.
+        prior_weight: Relative ridge weight toward ``x_prior`` when one is passed.
+
+    Example:
+        >>> solver = DLOESolver(lambda1=0.1)
+        >>> C = torch.tensor([[0.0, -1, 0], [0.0, 1, 0]])
+        >>> r = torch.tensor([[[0.0, 1, 1]], [[0.0, -1, 1]]]) / 2**0.5
+        >>> solver(torch.ones(2, 2) - torch.eye(2), C, r, torch.ones(2, 1, dtype=torch.bool)).shape
+        torch.Size([2, 1, 3])
+    """
+
+    def __init__(
+        self,
+        *,
+        lambda1: float = 0.1,
+        lambda2: float | None = None,
+        method: str = "auto",
+        prior_weight: float = 1e-6,
+    ) -> None:
+        super().__init__()
+        if method not in _METHODS:
+            raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+        self.lambda1 = float(lambda1)
+        self.lambda2 = None if lambda2 is None else float(lambda2)
+        self.method = method
+        self.prior_weight = float(prior_weight)
+
+    def forward(self, A: torch.Tensor, centers, rays, visible, x_prior=None) -> torch.Tensor:
+        """Solve for X, shape ``(N, J, 3)`` or ``(B, N, J, 3)``; see :func:`solve_structure`."""
+        return solve_structure(
+            A, centers, rays, visible, lambda1=self.lambda1, lambda2=self.lambda2, method=self.method,
+            x_prior=x_prior, prior_weight=self.prior_weight,
+        )  # fmt: skip
+
+    def extra_repr(self) -> str:
+        """Configuration shown by print(module)."""
+        return f"lambda1={self.lambda1}, lambda2={self.lambda2}, method={self.method!r}"
