@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import click
 import numpy as np
 
 from gttdata.cli import friendly_errors
-from gttdata.mocap import load_motion
+from gttdata.mocap import format_for_path, load_motion
 from gttdata.mocap.fetch import default_cache_dir, fetch_motions, list_cached
 from gttdata.mocap.motion import Motion
 
@@ -84,8 +85,16 @@ def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
     """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height."""
     if not file.exists() and not file.is_absolute() and (default_cache_dir() / file).is_file():
         file = default_cache_dir() / file
-    options = {"scale": scale} if scale is not None else {}
-    motion = load_motion(file, fmt, **options)
+    options = {}
+    if scale is not None:
+        if (format_for_path(file) if fmt == "auto" else fmt.lower()) != "bvh":
+            raise click.UsageError("--scale applies to BVH files only (e.g. --scale 0.01 for centimetres)")
+        options["scale"] = scale
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        motion = load_motion(file, fmt, **options)
+    for w in caught:
+        click.echo(f"warning: {w.message}", err=True)
     click.echo(f"file: {file}")
     for line in summarise_motion(motion):
         click.echo(line)
