@@ -11,7 +11,7 @@ from scipy.linalg import solveh_banded
 from gttdata.capture.views import Observations
 from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
 from gttnet.baselines.registry import Reconstruction, register_method
-from gttnet.baselines.trajectory_basis import _time_chain
+from gttnet.geometry.neighbours import temporal_chain_affinity
 
 __all__ = ["LAMBDAS", "difference_operator", "fit_highpass", "reconstruct_hpf"]
 
@@ -155,6 +155,6 @@ def reconstruct_hpf(
     log.debug("hpf: lam=%g", lam)
     return Reconstruction(
         points3d=X,
-        affinity=_time_chain(np.asarray(obs.timestamp_s)),
+        affinity=temporal_chain_affinity(np.asarray(obs.timestamp_s)),
         info={"lam": float(lam), "cv_ray_error_m": {f"{a:g}": b for a, b in cv.items()}},
     )

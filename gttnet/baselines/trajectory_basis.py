@@ -9,6 +9,7 @@ import numpy as np
 from gttdata.capture.views import Observations
 from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
 from gttnet.baselines.registry import Reconstruction, register_method
+from gttnet.geometry.neighbours import temporal_chain_affinity
 from gttnet.geometry.ordering import spectral_order
 
 __all__ = ["dct_basis", "fit_trajectory_basis", "reconstruct_dct"]
@@ -159,7 +160,7 @@ def reconstruct_dct(
     if k < 1:
         raise ValueError(f"dct: k must be >= 1, got {k}")
     X = fit_trajectory_basis(t, centers, rays, vis, k=k, ridge=ridge)
-    A = _time_chain(t)
+    A = temporal_chain_affinity(t)
     log.debug("dct: k=%d (cv %s)", k, cv)
     return Reconstruction(
         points3d=X,
@@ -167,13 +168,3 @@ def reconstruct_dct(
         order=spectral_order(A),
         info={"k": int(k), "cv_ray_error_m": {str(a): b for a, b in cv.items()}},
     )
-
-
-def _time_chain(timestamp_s: np.ndarray) -> np.ndarray:
-    """Binary affinity linking each image to its predecessor and successor in time, shape ``(N, N)``."""
-    seq = np.argsort(timestamp_s, kind="stable")
-    n = seq.shape[0]
-    A = np.zeros((n, n))
-    A[seq[:-1], seq[1:]] = 1.0
-    A[seq[1:], seq[:-1]] = 1.0
-    return A

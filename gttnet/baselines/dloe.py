@@ -1,0 +1,234 @@
+"""The DLOE baseline (Xu & Dunn, ICCV 2019): alternate W-, D- and X-steps to estimate a Laplacian and 3D."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from gttdata.capture.views import Observations
+from gttnet.baselines._simplex import solve_simplex_qp
+from gttnet.baselines.registry import Reconstruction, register_method
+from gttnet.geometry.neighbours import chain_affinity, neighbourhoods
+from gttnet.geometry.triangulation import pseudo_triangulate
+
+__all__ = ["DLOEParams", "candidate_neighbours", "d_step", "mds_embedding", "reconstruct_dloe", "w_step"]
+
+log = logging.getLogger(__name__)
+
+#: The reference's data are in inches; lambda3 and the stopping threshold are defined in those units, so
+#: the W-, D-steps and the stopping rule see X in inches (the X-step is unit-free).
+_INCH_PER_M = 1.0 / 0.0254
+
+
+@dataclass(frozen=True)
+class DLOEParams:
+    """Parameters of the DLOE optimisation (defaults: the reference's ``param.yaml``).
+
+    Args:
+        lambda1: Weight of the compactness terms (embedding distance in the W-step, ``x^T L_sym x``).
+        lambda3: Weight of the ray-convergence penalty (inch^2 units, see module note).
+        w_prior: Weight of the within-camera interpolation chain W_const in ``W`` (partial/full only).
+        d_const: Weight of the identity in ``D = (1 - d_const) diag(d) + d_const I``.
+        max_iter: Maximum number of W/D/X rounds.
+        tol: Stop when ``||X_k+1 - X_k||_F / (N P)`` (X in inches) falls below this.
+        n_candidates: Candidate neighbours per image in the W-step (best pseudo-triangulation partners).
+        qp_iters: Iterations of the batched simplex QP solver per W-step.
+    """
+
+    lambda1: float = 0.0015
+    lambda3: float = 0.03
+    w_prior: float = 0.1
+    d_const: float = 0.5
+    max_iter: int = 50
+    tol: float = 1e-3
+    n_candidates: int = 20
+    qp_iters: int = 300
+
+
+def candidate_neighbours(obs: Observations, cost: np.ndarray, order: np.ndarray, k: int) -> np.ndarray:
+    """Candidate W-step neighbours of each image, all from other cameras, shape ``(N, k)``, -1 padded.
+
+    * ``none`` and ``partial``: the GTT-Net neighbourhood rules
+      (:func:`gttnet.geometry.neighbours.neighbourhoods`): the ``k`` best pseudo-triangulation
+      partners, under ``partial`` kept as one contiguous run per other stream.
+    * ``full``: the ``k`` images of other cameras nearest in time.
+
+    The reference fits every row over all other-camera images; restricting to ``k`` candidates keeps
+    each row's QP at ``k`` unknowns (O(N k^2) per W-step instead of O(N^3)). With k = 20 the true
+    temporal neighbours are among the candidates whenever pseudo-triangulation ranks them top 20.
+    """
+    if obs.sequencing == "full":
+        t = np.asarray(obs.timestamp_s, dtype=np.float64)
+        dt = np.abs(t[:, None] - t[None, :])
+        dt[obs.cam_id[:, None] == obs.cam_id[None, :]] = np.inf
+        nb = np.argsort(dt, axis=1, kind="stable")[:, :k]
+        return np.where(np.isfinite(np.take_along_axis(dt, nb, axis=1)), nb, -1)
+    return neighbourhoods(
+        cost, sequencing=obs.sequencing, cam_id=obs.cam_id, stream_index=obs.stream_index, k=k, order=order
+    )
+
+
+def mds_embedding(X: np.ndarray) -> np.ndarray:
+    """1-D classical MDS embedding of the shapes: their scores on the first principal axis, shape ``(N,)``.
+
+    Args:
+        X: Shapes, shape ``(N, J, 3)`` (any length unit; the embedding has the same unit).
+    """
+    Y = X.reshape(X.shape[0], -1)
+    Y = Y - Y.mean(axis=0)
+    U, S, _ = np.linalg.svd(Y, full_matrices=False)
+    return U[:, 0] * S[0]
+
+
+def w_step(
+    Xi: np.ndarray,
+    cand: np.ndarray,
+    conv: np.ndarray,
+    emb: np.ndarray,
+    W_const: np.ndarray,
+    d: np.ndarray,
+    params: DLOEParams,
+    *,
+    w0: np.ndarray | None = None,
+) -> np.ndarray:
+    """W-step: each row of W_var is a simplex-constrained least-squares fit over its candidates.
+
+    Row n minimises, over ``w`` on the probability simplex (``c = 1 - w_prior`` with a chain prior,
+    else 1; ``delta = D_nn``)::
+
+        delta^2 ||x_n - (1 - c) W_const[n] X - c sum_m w_m x_m||^2
+          + lambda1 c delta sum_m w_m (e_n - e_m)^2
+          + lambda3 delta^2 (c sum_m w_m |conv_nm| + (1 - c) sum_m W_const[n, m] |conv_nm|)^2
+
+    With ``sum w = 1`` the first residual is ``sum_m w_m (a_n - c x_m)``, so its Gram matrix holds
+    only local differences (well conditioned). All rows are solved at once (batched FISTA).
+
+    Args:
+        Xi: Current shapes in inches, shape ``(N, J, 3)``.
+        cand: Candidates, shape ``(N, K)``, -1 padded.
+        conv: Ray convergence, shape ``(N, N)`` (NaN treated as 1: no triangulation support).
+        emb: 1-D embedding in inches, shape ``(N,)``.
+        W_const: Within-camera interpolation chain, shape ``(N, N)`` (zeros when unused).
+        d: Current diagonal of D, shape ``(N,)``.
+        params: Parameters.
+        w0: Warm start, shape ``(N, K)``.
+
+    Returns:
+        Candidate weights, shape ``(N, K)``; rows sum to 1 (0 for rows without candidates).
+    """
+    n = Xi.shape[0]
+    use_prior = bool(W_const.any())
+    c = 1.0 - params.w_prior if use_prior else 1.0
+    Y = Xi.reshape(n, -1)
+    aconv = np.abs(np.nan_to_num(conv, nan=1.0))
+    a = Y - (1.0 - c) * (W_const @ Y) if use_prior else Y
+    mask = cand >= 0
+    cidx = np.where(mask, cand, 0)
+    g = a[:, None, :] - c * Y[cidx]  # (N, K, 3P)
+    v = np.take_along_axis(aconv, cidx, axis=1) * mask
+    s = (W_const * aconv).sum(axis=1) if use_prior else np.zeros(n)
+    d2 = (d**2)[:, None, None]
+    H = d2 * np.einsum("nka,nla->nkl", g, g) + params.lambda3 * d2 * c**2 * v[:, :, None] * v[:, None, :]
+    lin = params.lambda1 * c * d[:, None] * (emb[:, None] - emb[cidx]) ** 2
+    lin = lin + 2.0 * params.lambda3 * (d**2)[:, None] * c * (1.0 - c) * s[:, None] * v
+    return solve_simplex_qp(H, lin, mask, x0=w0, n_iter=params.qp_iters)
+
+
+def d_step(Xi: np.ndarray, W: np.ndarray, conv: np.ndarray, params: DLOEParams) -> np.ndarray:
+    """D-step: ``d`` minimising ``sum_n (H_n d_n^2 + f_n d_n)`` with ``sum d = N`` and ``0 <= d <= N``.
+
+    With ``D = c2 diag(d) + (1 - c2) I`` (``c2 = 1 - d_const``), the terms are the weighted residual
+    ``||D (I - W) X||^2``, ``lambda1 sum_n D_nn sum_m W_nm ||x_n - x_m||^2`` and
+    ``lambda3 sum_n (D_nn sum_m W_nm |conv_nm|)^2``. The QP is separable up to the sum constraint:
+    ``d_n = clip((mu - f_n) / (2 H_n), 0, N)`` with ``mu`` found by bisection.
+
+    Args:
+        Xi: Shapes in inches, shape ``(N, J, 3)``.
+        W: Row-stochastic weights, shape ``(N, N)``.
+        conv: Ray convergence, shape ``(N, N)``.
+        params: Parameters.
+
+    Returns:
+        ``d``, shape ``(N,)``, summing to N.
+    """
+    n = Xi.shape[0]
+    c2 = 1.0 - params.d_const
+    Y = Xi.reshape(n, -1)
+    h = ((Y - W @ Y) ** 2).sum(axis=1)
+    sq = (Y**2).sum(axis=1)
+    dist2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * Y @ Y.T, 0.0)
+    rho = (np.abs(np.nan_to_num(conv, nan=1.0)) * W).sum(axis=1)
+    H = c2**2 * (h + params.lambda3 * rho**2) + 1e-12
+    f = 2.0 * c2 * (1.0 - c2) * (h + params.lambda3 * rho**2) + params.lambda1 * c2 * (W * dist2).sum(axis=1)
+    lo, hi = float(f.min()), float((f + 2.0 * H * n).max())
+    for _ in range(100):
+        mu = 0.5 * (lo + hi)
+        if np.clip((mu - f) / (2.0 * H), 0.0, n).sum() < n:
+            lo = mu
+        else:
+            hi = mu
+    return np.clip((0.5 * (lo + hi) - f) / (2.0 * H), 0.0, n)
+
+
+def _scatter(cand: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    W = np.zeros((n, n))
+    rows, cols = np.nonzero(cand >= 0)
+    np.add.at(W, (rows, cand[rows, cols]), w[rows, cols])
+    return W
+
+
+@register_method("dloe", requires="none", summary="DLOE alternating W/D/X optimisation (Xu & Dunn 2019)")
+def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrides) -> Reconstruction:
+    """DLOE: alternate the W-step, D-step and X-step from the pseudo-triangulation ``X_init``.
+
+    Each round: embed the current X in 1-D (:func:`mds_embedding`), fit ``W_var`` row by row
+    (:func:`w_step`), form ``W = 0.9 W_var + 0.1 W_const`` (within-camera interpolation chain, partial
+    and full sequencing only; ``W = W_var`` without sequencing), fit ``d`` (:func:`d_step`) and
+    ``D = 0.5 diag(d) + 0.5 I``, then solve the X-step with the affinity ``A = D W`` and pinned rays
+    (:func:`gttnet.solvers.xstep.solve_structure`, lambda1 = 0.0015). Stops after ``max_iter`` rounds or
+    when ``||dX||_F / (N P) < tol`` with X in inches (the reference's units).
+
+    Args:
+        obs: Observations (any sequencing).
+        xstep_method: Solver of the X-step (passed to ``solve_structure``).
+        **overrides: Fields of :class:`DLOEParams`.
+
+    Returns:
+        Reconstruction with the affinity ``A = D W`` (its order by the Fiedler vector).
+    """
+    from gttnet.solvers.xstep import solve_structure  # the X-step is torch-based; imported on use
+
+    params = DLOEParams(**overrides)
+    n = obs.n_images
+    centers, rays, vis = obs.centers(), obs.rays(), obs.visible
+    pt = pseudo_triangulate(centers, rays, vis, obs.cam_id)
+    cand = candidate_neighbours(obs, pt.cost, pt.order, params.n_candidates)
+    use_prior = obs.sequencing != "none" and params.w_prior > 0
+    W_const = (
+        chain_affinity(obs.cam_id, obs.stream_index, row_normalise=True) if use_prior else np.zeros((n, n))
+    )
+    X = pt.X_init
+    d = np.ones(n)
+    w = None
+    deltas: list[float] = []
+    for _ in range(params.max_iter):
+        Xi = X * _INCH_PER_M
+        w = w_step(Xi, cand, pt.convergence, mds_embedding(Xi), W_const, d, params, w0=w)
+        W = _scatter(cand, w, n)
+        if use_prior:
+            W = (1.0 - params.w_prior) * W + params.w_prior * W_const
+        d = d_step(Xi, W, pt.convergence, params)
+        A = ((1.0 - params.d_const) * d + params.d_const)[:, None] * W
+        X_new = solve_structure(
+            torch.from_numpy(A), centers, rays, vis, lambda1=params.lambda1, lambda2=None, method=xstep_method
+        )
+        X_new = X_new.detach().cpu().numpy() if isinstance(X_new, torch.Tensor) else np.asarray(X_new)
+        deltas.append(float(np.linalg.norm((X_new - X) * _INCH_PER_M) / (n * obs.n_joints)))
+        X = X_new
+        if deltas[-1] < params.tol:
+            break
+    log.info("dloe: %d rounds, last dX %.3g", len(deltas), deltas[-1] if deltas else float("nan"))
+    return Reconstruction(points3d=X, affinity=A, info={"iterations": len(deltas), "delta_inch": deltas})
