@@ -7,9 +7,12 @@ Conventions (Acclaim, as used by CMU):
     * A bone's ``axis ax ay az XYZ`` gives ``C`` (rotate about x, then y, then z: extrinsic ``xyz``).
       AMC values of its ``dof`` (in dof order, extrinsic) give ``M``; the bone's local rotation is
       ``C M C^-1`` and its global rotation ``G = G_parent C M C^-1``.
-    * Joint positions: the root at its AMC translation (ASF ``position`` when the root has no
-      translation dofs); every bone's joint at its **end**: ``E = E_parent + G (length * direction)``.
-      The 31 CMU joints are the root plus the 30 bone ends.
+    * Bone ends: the root at its AMC translation (ASF ``position`` when the root has no
+      translation dofs), then ``E = E_parent + G (length * direction)`` for every bone.
+    * Joint positions (``joints_at``): ``"start"`` (default) puts each bone's joint where the bone
+      starts (its parent's end; the root at the root), exactly as the CMU BVH conversions place
+      their joints, so CMU-31 names mean the same points from either loader (``lfemur`` = hip
+      centre). ``"end"`` puts it at the bone's end (``lfemur`` = knee; the tips are kept).
     * Axes: ASF is y-up; world is z-up: ``(x, y, z)_asf -> (x, -z, y)_world``.
 """
 
@@ -362,7 +365,12 @@ def _skeleton_for(asf: Path, sk: AsfSkeleton) -> tuple[Skeleton, list[int] | Non
 
 @register_loader("amc", suffixes=(".amc",))
 def load_amc(
-    path: str | Path, *, asf_path: str | Path | None = None, fps_hz: float = 120.0, up_axis: str = "y"
+    path: str | Path,
+    *,
+    asf_path: str | Path | None = None,
+    fps_hz: float = 120.0,
+    up_axis: str = "y",
+    joints_at: str = "start",
 ) -> Motion:
     """Load an AMC motion with its ASF skeleton as joint positions in metres, world z-up.
 
@@ -372,6 +380,7 @@ def load_amc(
             or the only ``.asf`` there.
         fps_hz: Frame rate (AMC files do not store it; CMU records at 120 Hz).
         up_axis: ``"y"`` (ASF default, converted to z-up) or ``"z"`` (kept).
+        joints_at: ``"start"`` (as CMU BVH files) or ``"end"`` of each bone; see the module docstring.
 
     Returns:
         Motion with ``positions`` of shape ``(T, J, 3)`` in metres, world z-up; J = 1 + number of
@@ -380,6 +389,8 @@ def load_amc(
     path = Path(path)
     if up_axis not in ("y", "z"):
         raise ValueError(f"up_axis must be 'y' or 'z', got {up_axis!r}")
+    if joints_at not in ("start", "end"):
+        raise ValueError(f"joints_at must be 'start' or 'end', got {joints_at!r}")
     asf = Path(asf_path) if asf_path is not None else _find_asf(path)
     if not asf.is_file():
         raise FileNotFoundError(2, "ASF file not found", str(asf))
@@ -387,6 +398,9 @@ def load_amc(
     values, radians = parse_amc(path, sk)
     scale = 0.0254 / sk.length_unit
     pos = _forward_kinematics(sk, values, radians) * scale
+    if joints_at == "start":
+        parents = [max(b.parent, 0) for b in sk.bones]  # the root starts at itself
+        pos = pos[:, parents]
     skeleton, order = _skeleton_for(asf, sk)
     if order is not None:
         pos = pos[:, order]
@@ -405,5 +419,6 @@ def load_amc(
             "asf_path": str(asf),
             "scale_m_per_unit": scale,
             "up_axis": up_axis,
+            "joints_at": joints_at,
         },
     )

@@ -39,9 +39,6 @@ def _one_line(exc: pytest.ExceptionInfo, path: Path) -> str:
     return msg
 
 
-# --------------------------------------------------------------------------------------------- registry
-
-
 def test_registry_lists_builtin_formats():
     assert {"bvh", "amc", "c3d", "npz", "hdf5"} <= set(available_formats())
     assert format_for_path("a/B.BVH") == "bvh"
@@ -73,9 +70,6 @@ def test_register_loader_decorator_dispatches(tmp_path):
     assert load_motion(f, flag=1).fps_hz == 30.0
     assert load_motion(f, fmt="TESTFMT").n_frames == 1
     assert calls == [("clip.tstm", {"flag": 1}), ("clip.tstm", {})]
-
-
-# -------------------------------------------------------------------------------------------------- BVH
 
 
 def _bvh_text(joints: list[tuple], values: np.ndarray, *, frames: int | None = None, dt: str = "0.01") -> str:
@@ -249,9 +243,6 @@ def test_bvh_malformed_is_one_line(tmp_path, case):
     _one_line(e, f)
 
 
-# ---------------------------------------------------------------------------------------------- ASF/AMC
-
-
 def _write_asf(
     path: Path, bones: list[dict], hierarchy: dict[str, list[str]], *, length: float = 0.45
 ) -> None:
@@ -298,9 +289,12 @@ def _two_bone_files(tmp_path: Path, frames: list[dict], **kw) -> Path:
 
 def test_asfamc_zero_pose_gives_offsets(tmp_path):
     zero = {"root": [1.0, 2.0, 3.0, 0, 0, 0], "a": [0, 0, 0], "b": [0]}
-    m = load_motion(_two_bone_files(tmp_path, [zero]))
-    expected = np.array([[1.0, 2.0, 3.0], [3.0, 2.0, 3.0], [3.0, 5.0, 7.0]]) * CMU_M
-    np.testing.assert_allclose(m.positions[0], _y_up_to_z_up(expected), atol=1e-12)
+    amc = _two_bone_files(tmp_path, [zero])
+    m = load_motion(amc, joints_at="end")
+    ends = np.array([[1.0, 2.0, 3.0], [3.0, 2.0, 3.0], [3.0, 5.0, 7.0]]) * CMU_M
+    np.testing.assert_allclose(m.positions[0], _y_up_to_z_up(ends), atol=1e-12)
+    starts = load_motion(amc)  # default: each joint where its bone starts, as in CMU BVH files
+    np.testing.assert_allclose(starts.positions[0], _y_up_to_z_up(ends[[0, 0, 1]]), atol=1e-12)
     assert m.skeleton.joint_names == ("root", "a", "b") and m.skeleton.parents == (-1, 0, 1)
     assert m.fps_hz == 120.0 and m.provenance["format"] == "amc"
     assert m.provenance["asf_path"] == str(tmp_path / "07.asf")
@@ -311,7 +305,7 @@ def test_asfamc_ninety_degrees_about_the_bone_axis(tmp_path):
     # taking its +x direction to -z. Bone b (dof rx about its own x = world x, tilted 30 deg by C
     # only in the frame, which C M C^-1 cancels at rx = 0) then hangs off a's end, rotated with a.
     frames = [{"root": [0, 0, 0, 0, 0, 0], "a": [90, 0, 0], "b": [0]}]
-    m = load_motion(_two_bone_files(tmp_path, frames), up_axis="z")
+    m = load_motion(_two_bone_files(tmp_path, frames), up_axis="z", joints_at="end")
     a_end = np.array([0.0, 0.0, -2.0])
     b_end = a_end + _rot("Y", 90) @ np.array([0.0, 3.0, 4.0])
     np.testing.assert_allclose(m.positions[0, 1:] / CMU_M, [a_end, b_end], atol=1e-12)
@@ -321,7 +315,7 @@ def test_asfamc_radians_root_rotation_and_units(tmp_path):
     frames = [{"root": [0, 0, 0, 0, np.pi / 2, 0], "a": [0, 0, 0], "b": [0]}]
     amc = _two_bone_files(tmp_path, frames, radians=True)
     _write_asf(tmp_path / "07.asf", _TWO_BONES, {"root": ["a"], "a": ["b"]}, length=1.0)
-    m = load_motion(amc, up_axis="z")
+    m = load_motion(amc, up_axis="z", joints_at="end")
     # Root Ry(90) maps +x to -z; units length 1.0 means inches.
     np.testing.assert_allclose(m.positions[0, 1], [0.0, 0.0, -2.0 * 0.0254], atol=1e-9)
 
@@ -346,8 +340,11 @@ def test_asfamc_cmu_names_give_cmu31(tmp_path):
     _write_asf(tmp_path / "subj.asf", bones, hierarchy)
     frame = {"root": [0.0] * 6} | {n: [0.0, 0.0, 0.0] for n in CMU31_JOINTS[1:]}
     _write_amc(tmp_path / "clip.amc", [frame, frame])
-    m = load_motion(tmp_path / "clip.amc", asf_path=tmp_path / "subj.asf")
+    m = load_motion(tmp_path / "clip.amc", asf_path=tmp_path / "subj.asf", joints_at="end")
     assert m.skeleton == cmu31() and m.n_frames == 2
+    starts = load_motion(tmp_path / "clip.amc", asf_path=tmp_path / "subj.asf")
+    np.testing.assert_allclose(starts.positions[:, 1], starts.positions[:, 0])  # lhipjoint starts at root
+    np.testing.assert_allclose(starts.positions[:, 2], m.positions[:, 1])  # lfemur starts at lhipjoint's end
     lengths = m.bone_lengths()[0] / CMU_M
     np.testing.assert_allclose(lengths, [1.0 + (c - 0) / 10 for c in m.skeleton.bones[:, 0]], rtol=1e-12)
 
@@ -566,9 +563,6 @@ def test_arrays_truncated_files(tmp_path):
         with pytest.raises(MotionFormatError, match="not a readable") as e:
             load_motion(bad)
         _one_line(e, bad)
-
-
-# ------------------------------------------------------------------------------------------- real files
 
 
 @pytest.mark.mocap
