@@ -99,7 +99,7 @@ def _expand(pattern: str) -> tuple[str, ...]:
     if not hits:
         hint = " (run `gttdata motions fetch` first)" if pattern.startswith(CACHE_PREFIX) else ""
         raise RecipeError(
-            f"paths: expected existing motion files, found no file for {pattern!r} -> {resolved}{hint}"
+            f"expected existing motion files, found no file for {pattern!r} -> {resolved}{hint}"
         )
     return tuple(hits)
 
@@ -115,8 +115,11 @@ def list_motions(recipe: GenerateRecipe, split: str) -> tuple[MotionRef, ...]:
                 refs.append(MotionRef(f"procedural/{kind}/{seed:06d}", k, kind, seed))
         else:
             for pattern in src.paths:
-                for p in _expand(pattern):
-                    refs.append(MotionRef(Path(p).stem, k, src.format, -1, p))
+                try:
+                    hits = _expand(pattern)
+                except RecipeError as exc:
+                    raise RecipeError(f"splits.{split}.sources[{k}].paths: {exc}") from exc
+                refs.extend(MotionRef(Path(p).stem, k, src.format, -1, p) for p in hits)
     return tuple(refs)
 
 
@@ -132,10 +135,7 @@ def validate_inputs(recipe: GenerateRecipe) -> dict[str, int]:
     owner: dict[str, str] = {}
     counts = {}
     for split in recipe.splits:
-        try:
-            refs = list_motions(recipe, split.name)
-        except RecipeError as exc:
-            raise RecipeError(f"splits.{split.name}.sources.{exc}") from exc
+        refs = list_motions(recipe, split.name)
         for r in refs:
             if r.path and owner.setdefault(os.path.realpath(r.path), split.name) != split.name:
                 raise RecipeError(
