@@ -85,7 +85,8 @@ def build_system(C, r, vis, *, lambda2, x_prior, eps) -> StructureSystem:
     if x_prior is not None:
         e = eps.repeat_interleave(j).view(s, 1, 1)
         xp = x_prior.permute(0, 2, 1, 3).reshape(s, n, 3)
-        W = e.unsqueeze(-1) * eye if W is None else W + e.unsqueeze(-1) * eye
+        ridge = (e.unsqueeze(-1) * eye).expand(s, n, 3, 3)
+        W = ridge if W is None else W + ridge
         w = e * xp if w is None else w + e * xp
     return StructureSystem(V=V, active=active, Ct=Ct, W=W, w=w, batch=b, joints=j)
 
