@@ -7,8 +7,8 @@ Conventions:
     * Position channels, when present, replace the matching ``OFFSET`` component (the common reading
       of root channels; CMU roots have a zero offset so both readings agree).
     * ``End Site`` blocks are not joints: a joint sits where its ``OFFSET`` puts it, as in the file.
-      For the CMU conversions this puts e.g. ``LHipJoint`` on ``Hips`` (zero offset); an ASF/AMC
-      load of the same clip puts each joint at its bone's end instead.
+      For the CMU conversions this puts e.g. ``LHipJoint`` on ``Hips`` (zero offset), i.e. each
+      joint at the start of its ASF bone, as :func:`gttdata.mocap.asfamc.load_amc` does by default.
     * Axes: BVH is y-up. World is z-up, so ``(x, y, z)_bvh -> (x, -z, y)_world`` (a +90 degree
       rotation about x; right-handed, forward ``+z_bvh`` becomes ``-y_world``). Pass
       ``up_axis="z"`` for files that are already z-up.

@@ -1,4 +1,4 @@
-"""Tests for ``gttdata motions`` (fetch, list, show) and the Debian fetcher behind it, with fake packages."""
+"""Tests for ``gttdata motions`` (fetch, list, show), the Debian fetcher behind it, and the fetched files."""
 
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ from click.testing import CliRunner
 
 from gttdata.cli import main
 from gttdata.errors import GttDataError
-from gttdata.mocap import fetch
+from gttdata.mocap import fetch, load_motion
 from gttdata.mocap.fetch import MOTION_FILES, fetch_motions, list_cached
+from gttdata.skeleton import cmu31
 
 _TINY_BVH = """HIERARCHY
 ROOT Hips
@@ -195,3 +196,33 @@ def test_cli_show_real_cmu_clip(mocap_dir):
     height = float(r.output.split("standing height: ")[1].split(" m")[0])
     assert 1.3 < height < 1.9
     assert np.isfinite(height)
+
+
+# Real fetched files, through the loaders.
+
+
+@pytest.mark.mocap
+def test_real_cmu_bvh(mocap_dir):
+    m = load_motion(mocap_dir / "01_01.bvh")
+    assert (m.n_frames, m.fps_hz, m.skeleton.n_joints) == (2752, 120.0, 31)
+    assert m.skeleton == cmu31()
+    lengths = m.bone_lengths()
+    np.testing.assert_allclose(lengths, lengths[:1].repeat(len(lengths), 0), atol=1e-9)
+    # Femur (hip to knee) of CMU subject 01 is 7.15 CMU units, about 0.40 m.
+    assert 0.35 < lengths[0, list(m.skeleton.bones[:, 0]).index(3)] < 0.45
+    assert -0.05 < np.percentile(m.positions[..., 2].min(axis=1), 50) < 0.15  # feet near the floor
+
+
+@pytest.mark.mocap
+def test_real_boxing_bvh_trusts_rows(mocap_dir):
+    with pytest.warns(UserWarning, match="header says 3069 frames but the file holds 3070"):
+        m = load_motion(mocap_dir / "Boxing_Toes.bvh")
+    assert (m.n_frames, m.fps_hz, m.skeleton.n_joints) == (3070, 100.0, 21)
+
+
+@pytest.mark.mocap
+def test_real_c3d(mocap_dir):
+    m = load_motion(mocap_dir / "squat.c3d")
+    assert (m.fps_hz, m.skeleton.n_joints, m.n_frames) == (120.0, 53, 2539)
+    assert m.provenance["up_axis"] == "y"
+    assert 1.4 < np.percentile(np.ptp(m.positions[..., 2], axis=1), 95) < 2.0
