@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from gttdata.cameras import ring_rig
+from gttdata.capture.occlusion import visible_in_camera
 from gttdata.capture.sample import CaptureSample
 from gttdata.errors import RecipeError
 from gttdata.generate_plan import (
@@ -23,7 +24,7 @@ from gttdata.generate_plan import (
 )
 from gttdata.mocap.arrays import save_motion
 from gttdata.mocap.procedural import generate_motion
-from gttdata.recipe import load_recipe, parse_recipe
+from gttdata.recipe import load_recipe, parse_recipe, recipe_to_dict
 
 RECIPES = Path(__file__).parents[2] / "recipes" / "gttdata"
 ARRAYS = [
@@ -152,3 +153,22 @@ def test_cmu_recipe_builds_from_the_motion_cache(mocap_dir: Path):
     assert validate_inputs(recipe)["test"] == 1
     s = build_sample(recipe, "test", 0)[0]
     assert s.motion_name == "01_03" and s.n_images == 300 and s.n_joints == 31
+
+
+def test_recipe_noise_and_missing_rate_reach_the_samples(tiny):
+    """sigma_px and joint_drop_rate set in a recipe show up in built samples within 5 standard errors."""
+    data = recipe_to_dict(tiny)
+    data["capture"].update(sigma_px=3.0, joint_drop_rate=0.3, window_s=2.5, fps_hz=30.0)
+    data["augmentations"] = []
+    recipe = parse_recipe(data)
+    resid, kept = [], []
+    for i in range(4):
+        s = build_sample(recipe, "train", i)[0]
+        in_view = visible_in_camera(
+            s.keypoints_gt_px.astype(float), np.ones(s.visible.shape), s.image_size[s.cam_id]
+        )
+        kept.append(s.visible[in_view])
+        resid.append((s.keypoints_px - s.keypoints_gt_px)[s.visible].astype(float).ravel())
+    r, k = np.concatenate(resid), np.concatenate(kept)
+    assert abs(r.std() - 3.0) < 5 * 3.0 / np.sqrt(2 * (r.size - 1))
+    assert abs((1 - k.mean()) - 0.3) < 5 * np.sqrt(0.3 * 0.7 / k.size)
