@@ -106,7 +106,8 @@ def _pair_block(
 def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np.ndarray) -> np.ndarray:
     """Fill joints without a triangulation from the best-ranked neighbour that has one, else fallbacks."""
     n, j, _ = X.shape
-    cand = have[order] & finite[:, :, None]  # (N, N, J): ranked neighbour m has joint p
+    ranked_finite = np.take_along_axis(finite, order, axis=1)
+    cand = have[order] & ranked_finite[:, :, None]  # (N, N, J): k-th ranked neighbour has joint p
     first = np.argmax(cand, axis=1)  # (N, J)
     found = np.take_along_axis(cand, first[:, None, :], axis=1)[:, 0]
     nb = np.take_along_axis(order, first, axis=1)

@@ -1,0 +1,125 @@
+"""Tests of sequencing-aware neighbourhoods and the chain affinities."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gttdata.capture.views import make_view
+from gttnet.errors import SequencingError
+from gttnet.geometry.neighbours import chain_affinity, neighbourhoods, temporal_chain_affinity
+from gttnet.geometry.triangulation import pseudo_triangulate
+
+INF = np.inf
+
+
+def test_none_ranks_other_cameras_by_cost_and_pads():
+    cam = np.array([0, 1, 1, 2])
+    cost = np.array([[INF, 3.0, 1.0, 2.0], [3.0, INF, INF, INF], [1.0, INF, INF, 0.5], [2.0, INF, 0.5, INF]])
+    nb = neighbourhoods(cost, sequencing="none", cam_id=cam, k=3)
+    assert nb.tolist() == [[2, 3, 1], [0, -1, -1], [3, 0, -1], [2, 0, -1]]
+    assert nb.dtype == np.int64
+
+
+def test_partial_keeps_one_contiguous_run_per_stream():
+    # Image 0 (camera 0) against camera 1's stream of 4 images (stream indices 0..3, stored shuffled).
+    # Stream index 3 looks good (repeated pose) but is not adjacent to the best run: it is dropped.
+    cam = np.array([0, 1, 1, 1, 1])
+    si = np.array([0, 2, 0, 3, 1])
+    cost = np.full((5, 5), INF)
+    cost[0, 1:] = cost[1:, 0] = [
+        9.0,
+        1.0,
+        2.0,
+        5.0,
+    ]  # by stream index: 0 -> 1.0, 1 -> 5.0, 2 -> 9.0, 3 -> 2.0
+    nb = neighbourhoods(cost, sequencing="partial", cam_id=cam, stream_index=si, k=3)
+    assert nb[0].tolist() == [2, 4, 1]
+    none = neighbourhoods(cost, sequencing="none", cam_id=cam, k=3)
+    assert none[0].tolist() == [2, 3, 4]
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 12))
+def test_partial_runs_are_contiguous_and_other_stream(seed, k):
+    g = np.random.default_rng(seed)
+    cam = g.integers(0, 3, size=30)
+    si = np.zeros(30, dtype=int)
+    for c in range(3):
+        idx = np.nonzero(cam == c)[0]
+        si[idx] = g.permutation(idx.size)
+    cost = g.uniform(size=(30, 30))
+    cost = cost + cost.T
+    cost[cam[:, None] == cam[None, :]] = INF
+    nb = neighbourhoods(cost, sequencing="partial", cam_id=cam, stream_index=si, k=k)
+    for i in range(30):
+        row = nb[i][nb[i] >= 0]
+        assert len(set(row.tolist())) == row.size
+        assert np.all(cam[row] != cam[i])
+        for c in np.unique(cam[row]):
+            s = np.sort(si[row[cam[row] == c]])
+            assert np.all(np.diff(s) == 1)
+        assert row.size == min(k, int(np.sum(cam != cam[i])))
+
+
+def test_full_uses_time_nearest_images():
+    t = np.array([0.0, 0.32, 0.1, 0.25, 0.2])
+    nb = neighbourhoods(np.zeros((5, 5)), sequencing="full", cam_id=np.arange(5), timestamp_s=t, k=2)
+    assert nb[0].tolist() == [2, 4]
+    assert nb[4].tolist() == [3, 2]
+    nb6 = neighbourhoods(np.zeros((5, 5)), sequencing="full", cam_id=np.arange(5), timestamp_s=t, k=6)
+    assert (nb6[:, 4:] == -1).all()
+
+
+def test_missing_sequencing_information_raises():
+    with pytest.raises(SequencingError, match="stream_index"):
+        neighbourhoods(np.zeros((2, 2)), sequencing="partial", cam_id=np.array([0, 1]))
+    with pytest.raises(SequencingError, match="timestamp_s"):
+        neighbourhoods(np.zeros((2, 2)), sequencing="full", cam_id=np.array([0, 1]))
+    with pytest.raises(ValueError, match="sequencing"):
+        neighbourhoods(np.zeros((2, 2)), sequencing="some", cam_id=np.array([0, 1]))
+
+
+def test_none_is_permutation_equivariant(toy_sample):
+    obs, _ = make_view(toy_sample, "none")
+    pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+    nb = neighbourhoods(pt.cost, sequencing="none", cam_id=obs.cam_id, k=5)
+    perm = np.random.default_rng(0).permutation(obs.n_images)
+    inv = np.argsort(perm)
+    nb_p = neighbourhoods(pt.cost[np.ix_(perm, perm)], sequencing="none", cam_id=obs.cam_id[perm], k=5)
+    np.testing.assert_array_equal(np.where(nb_p >= 0, perm[np.maximum(nb_p, 0)], -1), nb[perm])
+    assert inv.shape == perm.shape
+
+
+def test_partial_neighbours_are_temporally_closer_than_none(scene_factory):
+    sample = scene_factory(n_cameras=4, n_joints=8, frames_per_camera=40, seed=4)
+    spread = {}
+    for seq in ("none", "partial", "full"):
+        obs, gt = make_view(sample, seq)
+        pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+        nb = neighbourhoods(
+            pt.cost, sequencing=seq, cam_id=obs.cam_id, stream_index=obs.stream_index,
+            timestamp_s=obs.timestamp_s, order=pt.order, k=8,
+        )  # fmt: skip
+        spread[seq] = np.abs(gt.global_order[nb] - gt.global_order[:, None]).max()
+    assert spread["full"] <= 8 and spread["partial"] <= spread["none"]
+
+
+def test_chain_affinity_links_stream_neighbours():
+    A = chain_affinity(np.array([0, 0, 0, 1, 1]), np.array([5, 1, 3, 0, 7]))
+    expect = np.zeros((5, 5))
+    for a, b in [(1, 2), (2, 0), (3, 4)]:
+        expect[a, b] = expect[b, a] = 1
+    np.testing.assert_array_equal(A, expect)
+    W = chain_affinity(np.array([0, 0, 0, 1, 1]), np.array([5, 1, 3, 0, 7]), row_normalise=True)
+    np.testing.assert_allclose(W.sum(1), 1.0)
+    assert W[2, 0] == W[2, 1] == 0.5
+
+
+def test_temporal_chain_matches_ground_truth_affinity(toy_sample):
+    A = temporal_chain_affinity(toy_sample.timestamp_s, cam_id=toy_sample.cam_id)
+    np.testing.assert_array_equal(A, toy_sample.affinity_binary())
+    A_any = temporal_chain_affinity(toy_sample.timestamp_s)
+    assert A_any.sum() == 2 * (toy_sample.n_images - 1)
