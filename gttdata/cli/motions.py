@@ -9,8 +9,9 @@ import click
 import numpy as np
 
 from gttdata.cli import friendly_errors
+from gttdata.errors import GttDataError
 from gttdata.mocap import format_for_path, load_motion
-from gttdata.mocap.fetch import default_cache_dir, fetch_motions, list_cached
+from gttdata.mocap.fetch import cache_dir, fetch_motions, list_cached
 from gttdata.mocap.motion import Motion
 
 __all__ = ["motions", "register", "standing_height_m", "summarise_motion"]
@@ -55,8 +56,8 @@ def motions() -> None:
 @friendly_errors
 def fetch_cmd(dest: Path | None) -> None:
     """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache."""
-    for p in fetch_motions(dest):
-        click.echo(str(p))
+    paths = fetch_motions(dest, progress=click.echo)
+    click.echo(f"{len(paths)} motion files in {paths[0].parent if paths else dest}")
 
 
 @motions.command("list")
@@ -64,14 +65,25 @@ def fetch_cmd(dest: Path | None) -> None:
     "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
 )
 def list_cmd(dest: Path | None) -> None:
-    """List the cached motion files."""
-    cache = dest if dest is not None else default_cache_dir()
+    """List the cached motion files with their frames, frame rate and joints."""
+    cache = dest if dest is not None else cache_dir()
     files = list_cached(cache)
     if not files:
         click.echo(f"no motion files in {cache}; run 'gttdata motions fetch'")
         return
+    click.echo(f"{'file':<24} {'frames':>7} {'fps':>6} {'joints':>6} {'MB':>6}")
     for p in files:
-        click.echo(f"{p}\t{p.stat().st_size / 1e6:.1f} MB")
+        size_mb = p.stat().st_size / 1e6
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter(
+                    "ignore"
+                )  # 'show' reports loader warnings; a listing stays one line per file
+                m = load_motion(p)
+        except (GttDataError, OSError) as exc:
+            click.echo(f"{p.name:<24} unreadable ({exc}) {size_mb:.1f} MB")
+            continue
+        click.echo(f"{p.name:<24} {m.n_frames:>7} {m.fps_hz:>6g} {m.skeleton.n_joints:>6} {size_mb:>6.1f}")
 
 
 @motions.command("show")
@@ -83,8 +95,8 @@ def list_cmd(dest: Path | None) -> None:
 @friendly_errors
 def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
     """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height."""
-    if not file.exists() and not file.is_absolute() and (default_cache_dir() / file).is_file():
-        file = default_cache_dir() / file
+    if not file.exists() and not file.is_absolute() and (cache_dir() / file).is_file():
+        file = cache_dir() / file
     options = {}
     if scale is not None:
         if (format_for_path(file) if fmt == "auto" else fmt.lower()) != "bvh":

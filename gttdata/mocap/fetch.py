@@ -16,12 +16,21 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from gttdata.errors import GttDataError
 
-__all__ = ["MOTION_FILES", "SYSTEM_ROOT", "MotionFile", "default_cache_dir", "fetch_motions", "list_cached"]
+__all__ = [
+    "MOTION_FILES",
+    "SYSTEM_ROOT",
+    "MotionFile",
+    "cache_dir",
+    "default_cache_dir",
+    "fetch_motions",
+    "list_cached",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -59,10 +68,14 @@ SYSTEM_ROOT = Path("/")
 _MOTION_SUFFIXES = (".bvh", ".c3d", ".amc", ".asf", ".npz", ".h5", ".hdf5")
 
 
-def default_cache_dir() -> Path:
-    """``$GTT_CACHE`` if set, else ``~/.cache/gtt/motions``."""
+def cache_dir() -> Path:
+    """The motion cache: ``$GTT_CACHE`` if set, else ``~/.cache/gtt/motions``."""
     env = os.environ.get("GTT_CACHE")
     return Path(env).expanduser() if env else Path.home() / ".cache" / "gtt" / "motions"
+
+
+#: Alias of :func:`cache_dir`, kept for existing callers.
+default_cache_dir = cache_dir
 
 
 def _copy_member(root: Path, member: str, dest: Path) -> bool:
@@ -116,13 +129,16 @@ def fetch_motions(
     *,
     system_root: str | Path | None = None,
     files: tuple[MotionFile, ...] = MOTION_FILES,
+    progress: Callable[[str], None] | None = None,
 ) -> list[Path]:
     """Make every file of ``files`` present in ``dest``; files already there are kept (idempotent).
 
     Args:
-        dest: Cache directory; defaults to :func:`default_cache_dir`.
+        dest: Cache directory; defaults to :func:`cache_dir`.
         system_root: Where installed packages live; defaults to :data:`SYSTEM_ROOT`.
         files: Which files to fetch.
+        progress: Called with one human-readable line per step (the CLI passes ``click.echo``);
+            every line is also logged at INFO.
 
     Returns:
         Paths of all requested files in ``dest``.
@@ -130,27 +146,37 @@ def fetch_motions(
     Raises:
         GttDataError: A package could not be downloaded or lacks a file (one line).
     """
-    dest = Path(dest) if dest is not None else default_cache_dir()
+
+    def say(msg: str) -> None:
+        _log.info("%s", msg)
+        if progress is not None:
+            progress(msg)
+
+    dest = Path(dest) if dest is not None else cache_dir()
     dest.mkdir(parents=True, exist_ok=True)
-    todo = [f for f in files if not (dest / f.name).is_file()]
-    for f in files:
-        if f not in todo:
-            _log.info("%s: already cached", f.name)
     root = Path(system_root) if system_root is not None else SYSTEM_ROOT
-    todo = [f for f in todo if not _copy_member(root, f.member, dest / f.name)]
+    todo = []
+    for f in files:
+        if (dest / f.name).is_file():
+            say(f"{f.name}: already cached")
+        elif _copy_member(root, f.member, dest / f.name):
+            say(f"{f.name}: copied from the installed package {f.package} ({root / f.member})")
+        else:
+            todo.append(f)
     for package in dict.fromkeys(f.package for f in todo):
+        say(f"{package}: not installed; running 'apt-get download {package}' and 'dpkg-deb -x'")
         with tempfile.TemporaryDirectory(prefix="gtt-fetch-") as tmp:
-            root = _unpack_package(package, Path(tmp))
+            unpacked = _unpack_package(package, Path(tmp))
             for f in (f for f in todo if f.package == package):
-                if not _copy_member(root, f.member, dest / f.name):
+                if not _copy_member(unpacked, f.member, dest / f.name):
                     raise GttDataError(f"package {package!r} does not contain {f.member} (or {f.member}.gz)")
-                _log.info("%s: fetched from %s", f.name, package)
+                say(f"{f.name}: unpacked from {package}")
     return [dest / f.name for f in files]
 
 
 def list_cached(cache: str | Path | None = None) -> list[Path]:
     """Motion files (by suffix) in the cache directory, sorted by name; empty if it does not exist."""
-    cache = Path(cache) if cache is not None else default_cache_dir()
+    cache = Path(cache) if cache is not None else cache_dir()
     if not cache.is_dir():
         return []
     return sorted(p for p in cache.iterdir() if p.is_file() and p.suffix.lower() in _MOTION_SUFFIXES)

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from gttdata.cli import main
 from gttdata.errors import GttDataError
 from gttdata.mocap import fetch, load_motion
-from gttdata.mocap.fetch import MOTION_FILES, fetch_motions, list_cached
+from gttdata.mocap.fetch import MOTION_FILES, cache_dir, fetch_motions, list_cached
 from gttdata.skeleton import cmu31
 
 _TINY_BVH = """HIERARCHY
@@ -130,8 +130,9 @@ def test_fetch_apt_failure_reports_its_message(tmp_path, monkeypatch):
     monkeypatch.setattr(fetch, "SYSTEM_ROOT", tmp_path / "empty-root")
     result = CliRunner().invoke(main, ["motions", "fetch", "--dest", str(tmp_path / "cache")])
     assert result.exit_code == 1
-    assert "apt-get download assimp-testmodels' failed (E: Unable to locate package)" in result.output
-    assert len(result.output.strip().splitlines()) == 1
+    *progress, error = result.output.strip().splitlines()
+    assert "apt-get download assimp-testmodels' failed (E: Unable to locate package)" in error
+    assert error.startswith("Error: ") and all("Error" not in line for line in progress)
 
 
 def test_cli_fetch_list_show(tmp_path, fake_apt, monkeypatch):
@@ -142,9 +143,23 @@ def test_cli_fetch_list_show(tmp_path, fake_apt, monkeypatch):
     assert r.exit_code == 0 and "no motion files" in r.output
     r = runner.invoke(main, ["motions", "fetch"])
     assert r.exit_code == 0, r.output
-    assert r.output.split() == [str(cache / f.name) for f in MOTION_FILES]
+    lines = r.output.strip().splitlines()
+    assert (
+        lines[0]
+        == "assimp-testmodels: not installed; running 'apt-get download assimp-testmodels' and 'dpkg-deb -x'"
+    )
+    assert lines[-1] == f"{len(MOTION_FILES)} motion files in {cache}"
+    assert sum("unpacked from" in line for line in lines) == len(MOTION_FILES)
+    r = runner.invoke(main, ["motions", "fetch"])
+    assert r.exit_code == 0 and r.output.count("already cached") == len(MOTION_FILES)
     r = runner.invoke(main, ["motions", "list"])
-    assert r.exit_code == 0 and r.output.count("\n") == len(MOTION_FILES)
+    assert r.exit_code == 0, r.output
+    lines = r.output.strip().splitlines()
+    assert lines[0].split() == ["file", "frames", "fps", "joints", "MB"]
+    assert len(lines) == 1 + len(MOTION_FILES)
+    # The fake BVH clips read as 3 frames, 25 Hz, 2 joints; the fake C3D bytes as unreadable, on one line.
+    assert lines[1].split()[:4] == ["01_01.bvh", "3", "25", "2"]
+    assert "nick_freeform_001.c3d" in lines[4] and "unreadable" in lines[4]
     # By cache name; the tiny clip: 3 frames at 25 Hz, 2 joints, head 1.7 m above the hips.
     r = runner.invoke(main, ["motions", "show", "01_01.bvh", "--scale", "0.01"])
     assert r.exit_code == 0, r.output
@@ -226,3 +241,39 @@ def test_real_c3d(mocap_dir):
     assert (m.fps_hz, m.skeleton.n_joints, m.n_frames) == (120.0, 53, 2539)
     assert m.provenance["up_axis"] == "y"
     assert 1.4 < np.percentile(np.ptp(m.positions[..., 2], axis=1), 95) < 2.0
+
+
+def test_fetch_reports_progress_per_file(tmp_path):
+    root = _fake_tree(tmp_path / "sys", gzip_c3d=True)
+    lines: list[str] = []
+    fetch_motions(tmp_path / "cache", system_root=root, progress=lines.append)
+    assert [line.split(":")[0] for line in lines] == [f.name for f in MOTION_FILES]
+    assert all("copied from the installed package" in line for line in lines)
+    lines.clear()
+    fetch_motions(tmp_path / "cache", system_root=root, progress=lines.append)
+    assert lines == [f"{f.name}: already cached" for f in MOTION_FILES]
+
+
+def test_cache_dir_honours_env(tmp_path, monkeypatch):
+    monkeypatch.setenv("GTT_CACHE", str(tmp_path / "c"))
+    assert cache_dir() == tmp_path / "c"
+    monkeypatch.delenv("GTT_CACHE")
+    assert cache_dir() == Path.home() / ".cache" / "gtt" / "motions"
+
+
+@pytest.mark.mocap
+def test_real_fetch_then_show(tmp_path, monkeypatch):
+    """The real thing: copies from /usr/share when installed, else apt-get download (needs the Debian mirror)."""
+    installed = all(
+        (Path("/") / f.member).is_file() or (Path("/") / (f.member + ".gz")).is_file() for f in MOTION_FILES
+    )
+    if not installed and shutil.which("apt-get") is None:
+        pytest.skip("neither the Debian packages nor apt-get are available")
+    monkeypatch.setenv("GTT_CACHE", str(tmp_path / "cache"))
+    r = CliRunner().invoke(main, ["motions", "fetch"])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["motions", "show", "01_01.bvh"])
+    assert r.exit_code == 0, r.output
+    assert "frames: 2752" in r.output and "joints: 31" in r.output and "fps: 120" in r.output
+    r = CliRunner().invoke(main, ["motions", "list"])
+    assert "Boxing_Toes.bvh" in r.output and " 3070 " in r.output
