@@ -73,9 +73,10 @@ def _convert_param(ctx: _Ctx, key: str, v: object, meta: dict) -> Param:
     if _is_number(v):
         return Param("value", (_check_number(ctx, key, v, meta, expected),), **kw)
     if isinstance(v, list) and meta.get("allow_list"):
+        nums = num.replace("a number", "numbers").replace("an integer", "integers")
         if not v:
-            raise ctx.fail(key, f"a non-empty list of {num}", v)
-        return Param("list", tuple(_check_number(ctx, key, x, meta, f"a list of {num}") for x in v), **kw)
+            raise ctx.fail(key, f"a non-empty list of {nums}", v)
+        return Param("list", tuple(_check_number(ctx, key, x, meta, f"a list of {nums}") for x in v), **kw)
     if not (isinstance(v, dict) and len(v) == 1 and next(iter(v)) in _DIST_KINDS):
         raise ctx.fail(key, expected, v)
     kind, args = next(iter(v.items()))

@@ -72,7 +72,7 @@ def test_every_recipe_validates(path: Path):
             "recipe.yaml: capture.sigma_px: expected a number >= 0 or a distribution",
         ),
         ("capture.sigma_px={normal: [1, -1]}", "recipe.yaml: capture.sigma_px.normal: expected [mu, sigma]"),
-        ("capture.fps_hz=[30, 0]", "recipe.yaml: capture.fps_hz: expected a list of a number > 0"),
+        ("capture.fps_hz=[30, 0]", "recipe.yaml: capture.fps_hz: expected a list of numbers > 0, found 0"),
         ("capture.stagger=sometimes", "recipe.yaml: capture.stagger: expected one of 'even', 'random'"),
         ("rig.n_cameras=2.5", "recipe.yaml: rig.n_cameras: expected an integer >= 1"),
         ("rig.kind=sphere", "recipe.yaml: rig.kind: expected one of 'ring', 'file'"),
