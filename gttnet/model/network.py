@@ -44,6 +44,8 @@ class GTTNetConfig:
         pointnet: Feed the U-Net PointNet virtual points instead of the joints (cross-domain variant).
         n_virtual: PointNet virtual points V.
         domains: Joint count per domain (topology name), one PointNet decoder each.
+        prior_weight: Relative ridge of the DLOE layer toward X_init (keeps a top-Q graph whose component
+            sees a joint along one ray direction solvable); None: no ridge (singular graphs then raise).
     """
 
     n_joints: int = 31
@@ -57,6 +59,7 @@ class GTTNetConfig:
     pointnet: bool = False
     n_virtual: int = 10
     domains: dict[str, int] = field(default_factory=dict)
+    prior_weight: float | None = 1e-6
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "widths", tuple(int(w) for w in self.widths))
@@ -190,6 +193,9 @@ class GTTNet(nn.Module):
         """
         solver = self._solver if self._solver is not None else _default_solver()
         dtype = torch.promote_types(seq.rays.dtype, torch.float32)
+        prior = {}
+        if self.config.prior_weight is not None:
+            prior = {"x_prior": seq.x_init.detach().to(dtype), "prior_weight": self.config.prior_weight}
         with torch.autocast(device_type=a_sparse.device.type, enabled=False):
             return solver(
                 a_sparse.to(dtype),
@@ -198,6 +204,7 @@ class GTTNet(nn.Module):
                 seq.visible,
                 lambda1=self.config.lambda1,
                 lambda2=self.config.lambda2,
+                **prior,
             )
 
 

@@ -1,0 +1,285 @@
+"""The only bridge from gttdata samples to GTT-Net training items (torch Dataset, sampler and collate)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gttdata.capture.views import GroundTruth, Observations, make_view
+from gttnet.model.inputs import SequenceInput, prepare_inputs
+
+__all__ = [
+    "TrainItem",
+    "RecipeSource",
+    "ShardSource",
+    "SequenceDataset",
+    "EpochStream",
+    "collate_items",
+    "affinity_targets",
+    "prepare_item",
+    "open_source",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TrainItem:
+    """One training sequence: network inputs plus the supervision the losses may use.
+
+    Args:
+        inputs: Observation-only network input.
+        points3d: Ground-truth joints in world, metres, shape ``(N, J, 3)``.
+        target_binary: Binary A^G over each image's neighbourhood, shape ``(N, K)``.
+        target_continuous: Continuous A^G (interpolation weights) over the neighbourhood, shape ``(N, K)``.
+        name: Sample name and condition, for logs.
+    """
+
+    inputs: SequenceInput
+    points3d: torch.Tensor
+    target_binary: torch.Tensor
+    target_continuous: torch.Tensor
+    name: str
+
+    def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> TrainItem:
+        """Move every tensor to ``device`` (floating ones cast to ``dtype``)."""
+        return TrainItem(
+            inputs=self.inputs.to(device, dtype),
+            points3d=self.points3d.to(device=device, dtype=dtype),
+            target_binary=self.target_binary.to(device=device, dtype=dtype),
+            target_continuous=self.target_continuous.to(device=device, dtype=dtype),
+            name=self.name,
+        )
+
+    def rotated(self, R: torch.Tensor) -> TrainItem:
+        """Structure, cameras and ground truth rotated together about the world origin (F^GR)."""
+        R = R.to(self.points3d)
+        return replace(self, inputs=self.inputs.rotated(R), points3d=self.points3d @ R.T)
+
+
+def affinity_targets(gt_nbr: np.ndarray, gt_w: np.ndarray, nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A^G gathered over each image's neighbourhood.
+
+    Args:
+        gt_nbr: True previous/next image of another camera, shape ``(N, 2)``, ``-1`` where none.
+        gt_w: Their interpolation weights, shape ``(N, 2)``.
+        nbr: Neighbourhoods, shape ``(N, K)``, ``-1`` padded.
+
+    Returns:
+        ``(binary, continuous)``, each shape ``(N, K)``: binary is symmetric temporal adjacency (m is
+        n's neighbour in time or n is m's); continuous is row n's interpolation weight of m.
+    """
+    n = nbr.shape[0]
+    valid = nbr >= 0
+    m = np.where(valid, nbr, 0)
+    fwd = gt_nbr[:, None, :] == m[:, :, None]  # (N, K, 2): m is one of n's temporal neighbours
+    back = (gt_nbr[m] == np.arange(n)[:, None, None]).any(-1)  # n is one of m's
+    binary = (fwd.any(-1) | back) & valid
+    cont = np.where(fwd & valid[..., None], gt_w[:, None, :], 0.0).sum(-1)
+    return binary.astype(np.float64), cont
+
+
+def prepare_item(obs: Observations, gt: GroundTruth, *, k: int, name: str = "") -> TrainItem:
+    """Network inputs (from ``obs`` only) and supervision (from ``gt``) for one view of a capture.
+
+    Args:
+        obs: Observations of one sequencing condition.
+        gt: The matching ground truth.
+        k: Neighbours per image K.
+        name: Label for logs.
+
+    Returns:
+        A :class:`TrainItem` on the CPU (float32).
+    """
+    inputs = prepare_inputs(obs, k=k)
+    binary, cont = affinity_targets(gt.affinity_nbr, gt.affinity_w, inputs.nbr.numpy())
+    return TrainItem(
+        inputs=inputs,
+        points3d=torch.as_tensor(gt.points3d, dtype=torch.float32),
+        target_binary=torch.as_tensor(binary, dtype=torch.float32),
+        target_continuous=torch.as_tensor(cont, dtype=torch.float32),
+        name=f"{name}:{obs.sequencing}",
+    )
+
+
+class RecipeSource:
+    """Samples of one split built on the fly from a gttdata generate recipe (deterministic per index).
+
+    Args:
+        recipe: A gttdata GenerateRecipe.
+        split: Split name.
+    """
+
+    def __init__(self, recipe, split: str) -> None:
+        from gttdata.generate_plan import n_samples
+
+        counts = n_samples(recipe)
+        if split not in counts:
+            raise ValueError(f"the data recipe has no split {split!r}; splits: {sorted(counts)}")
+        self.recipe, self.split, self._n = recipe, split, counts[split]
+
+    def __len__(self) -> int:
+        return self._n
+
+    def view(self, index: int, sequencing: str, variant: str) -> tuple[Observations, GroundTruth]:
+        """Observations and ground truth of sample ``index`` under ``sequencing``, variant ``variant``."""
+        from gttdata.generate_plan import build_sample
+
+        samples = {s.variant: s for s in build_sample(self.recipe, self.split, index)}
+        if variant not in samples:
+            raise ValueError(f"sample {index} has no variant {variant!r}; variants: {sorted(samples)}")
+        return make_view(samples[variant], sequencing)
+
+
+class ShardSource:
+    """Samples of one split read from gttdata shards (``gttdata.dataset.CaptureDataset``), opened lazily.
+
+    Args:
+        root: Dataset directory.
+        split: Split name.
+    """
+
+    def __init__(self, root: str | Path, split: str) -> None:
+        self.root, self.split = str(root), split
+        self._sets: dict[tuple[str, str], object] = {}
+        self._n = len(self._dataset("none", "orig"))
+
+    def _dataset(self, sequencing: str, variant: str):
+        key = (sequencing, variant)
+        if key not in self._sets:
+            from gttdata.dataset import CaptureDataset
+
+            self._sets[key] = CaptureDataset(
+                self.root, split=self.split, sequencing=sequencing, variant=variant
+            )
+        return self._sets[key]
+
+    def __len__(self) -> int:
+        return self._n
+
+    def view(self, index: int, sequencing: str, variant: str) -> tuple[Observations, GroundTruth]:
+        """Observations and ground truth of sample ``index`` under ``sequencing``, variant ``variant``."""
+        return self._dataset(sequencing, variant).view(index)
+
+    def __getstate__(self) -> dict:
+        # h5py handles must be opened in each worker, never pickled.
+        return {**self.__dict__, "_sets": {}}
+
+
+def open_source(spec, split: str):
+    """The sample source a :class:`~gttnet.train.recipe.DataSpec` describes, generating shards if needed."""
+    from gttdata.recipe import load_recipe
+
+    gen = load_recipe(spec.generate, spec.generate_overrides)
+    if spec.source == "recipe":
+        return RecipeSource(gen, split)
+    root = Path(spec.root or gen.output_dir)
+    if not any(root.glob("**/*.h5")):
+        from gttdata.cli import main as gttdata_main
+
+        log.info("no shards under %s: generating them from %s", root, spec.generate)
+        args = ["generate", spec.generate, *[a for o in spec.generate_overrides for a in ("--set", o)]]
+        if spec.root:
+            args += ["--out", str(root)]
+        gttdata_main(args, standalone_mode=False)
+    return ShardSource(root, split)
+
+
+class SequenceDataset(torch.utils.data.Dataset):
+    """Map-style dataset of :class:`TrainItem`; keys are ``(index, salt, sequencing | None)``.
+
+    The sequencing condition and variant of a key with ``sequencing=None`` are drawn from
+    ``SeedSequence([seed, index, salt])``, so the stream of items depends only on the keys, never on
+    worker count or process (which makes resumption and DDP exact).
+
+    Args:
+        source: A :class:`RecipeSource` or :class:`ShardSource`.
+        k: Neighbours per image K.
+        sequencing: Weight of each condition.
+        variants: Variants to draw from.
+        seed: Seed of the draws.
+        cache: Keep prepared items in memory.
+        indices: Sample indices to use (default: all).
+    """
+
+    def __init__(
+        self,
+        source,
+        *,
+        k: int,
+        sequencing: dict[str, float],
+        variants: Sequence[str] = ("orig",),
+        seed: int = 0,
+        cache: bool = True,
+        indices: Sequence[int] | None = None,
+    ) -> None:
+        self.source, self.k, self.seed, self.cache = source, k, seed, cache
+        names = [s for s, w in sequencing.items() if w > 0]
+        w = np.array([sequencing[s] for s in names], dtype=np.float64)
+        self.conditions, self.weights = names, w / w.sum()
+        self.variants = list(variants)
+        self.indices = list(range(len(source))) if indices is None else list(indices)
+        self._cache: dict[tuple[int, str, str], TrainItem] = {}
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, key: tuple[int, int, str | None]) -> TrainItem:
+        pos, salt, sequencing = key
+        index = self.indices[pos]
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, index, salt]))
+        if sequencing is None:
+            sequencing = self.conditions[int(rng.choice(len(self.conditions), p=self.weights))]
+        variant = self.variants[int(rng.integers(len(self.variants)))]
+        ck = (index, sequencing, variant)
+        if ck in self._cache:
+            return self._cache[ck]
+        obs, gt = self.source.view(index, sequencing, variant)
+        item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}")
+        if self.cache:
+            self._cache[ck] = item
+        return item
+
+
+class EpochStream(torch.utils.data.Sampler):
+    """Endless stream of keys: epoch e is a seeded permutation, strided over DDP ranks.
+
+    Args:
+        n: Dataset length.
+        seed: Seed of the permutations.
+        rank: This process's rank.
+        world: Number of processes.
+        start_epoch: Epoch to start in (resumption).
+        start_pos: Keys of ``start_epoch`` to skip (resumption).
+    """
+
+    def __init__(
+        self, n: int, *, seed: int, rank: int = 0, world: int = 1, start_epoch: int = 0, start_pos: int = 0
+    ):
+        if n < world:
+            raise ValueError(f"{n} training samples cannot be split over {world} processes")
+        self.n, self.seed, self.rank, self.world = n, seed, rank, world
+        self.start_epoch, self.start_pos = start_epoch, start_pos
+
+    def epoch_keys(self, epoch: int) -> list[tuple[int, int, None]]:
+        """This rank's keys of one epoch (equal count on every rank)."""
+        perm = np.random.default_rng(np.random.SeedSequence([self.seed, 7919, epoch])).permutation(self.n)
+        per_rank = self.n // self.world
+        mine = perm[self.rank :: self.world][:per_rank]
+        return [(int(i), epoch, None) for i in mine]
+
+    def __iter__(self) -> Iterator[tuple[int, int, None]]:
+        epoch, pos = self.start_epoch, self.start_pos
+        while True:
+            yield from self.epoch_keys(epoch)[pos:]
+            epoch, pos = epoch + 1, 0
+
+
+def collate_items(items: list[TrainItem]) -> list[TrainItem]:
+    """Keep a batch as a list: sequences differ in N."""
+    return list(items)

@@ -1,0 +1,141 @@
+"""Trained GTT-Net at inference: model files, the bundled model, and the ``"gttnet"`` reconstruction method."""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gttdata.capture.views import Observations
+from gttnet.baselines.registry import Reconstruction, register_method
+from gttnet.errors import ModelError
+from gttnet.model.inputs import prepare_inputs
+from gttnet.model.network import GTTNet, GTTNetConfig
+
+__all__ = [
+    "BUNDLED_MODEL",
+    "MODEL_FORMAT",
+    "save_model",
+    "load_model",
+    "GTTNetReconstructor",
+    "reconstruct_gttnet",
+]
+
+log = logging.getLogger(__name__)
+
+#: The model shipped with the package (written by the lead after training ``recipes/gttnet/default.yaml``).
+BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "assets" / "gttnet_default.pt"
+MODEL_FORMAT = "gttnet-model/1"
+
+
+def save_model(path: str | Path, model: GTTNet, *, card: dict | None = None) -> Path:
+    """Write a model file (weights + config) and its JSON model card next to it (``.json``).
+
+    Args:
+        path: Destination ``.pt`` file.
+        model: Trained network.
+        card: Model-card fields (recipe, data, metrics...), JSON-serialisable.
+
+    Returns:
+        The model path.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().float() for k, v in model.state_dict().items()}
+    torch.save({"format": MODEL_FORMAT, "config": asdict(model.config), "state_dict": state}, path)
+    info = {"format": MODEL_FORMAT, "config": asdict(model.config), **(card or {})}
+    path.with_suffix(".json").write_text(json.dumps(info, indent=2, default=str) + "\n")
+    return path
+
+
+def load_model(path: str | Path | None = None, *, device: str | torch.device = "cpu") -> GTTNet:
+    """Load a model file, a training run's checkpoint, or (``path=None``) the bundled model.
+
+    Args:
+        path: A file written by :func:`save_model`, a ``checkpoint.pt``, a run directory, or None.
+        device: Where to put the model.
+
+    Returns:
+        The network in eval mode.
+
+    Raises:
+        ModelError: If there is no such file, no bundled model, or the file is not a GTT-Net model.
+    """
+    if path is None:
+        if not BUNDLED_MODEL.is_file():
+            raise ModelError(
+                f"no trained model is available: {BUNDLED_MODEL} is not installed; train one with "
+                "'gttnet train recipes/gttnet/default.yaml' and pass --model RUN_DIR/model.pt"
+            )
+        path = BUNDLED_MODEL
+    p = Path(path)
+    if p.is_dir():
+        p = p / "model.pt" if (p / "model.pt").is_file() else p / "checkpoint.pt"
+    if not p.is_file():
+        raise ModelError(f"no trained model is available: {p} does not exist")
+    try:
+        payload = torch.load(p, map_location="cpu", weights_only=False)
+    except Exception as exc:  # torch raises many types for a corrupt file
+        raise ModelError(f"{p}: not a readable GTT-Net model ({exc.__class__.__name__})") from exc
+    if not isinstance(payload, dict) or ("config" not in payload and "model_config" not in payload):
+        raise ModelError(f"{p}: not a GTT-Net model file (no config)")
+    cfg = payload.get("config", payload.get("model_config"))
+    cfg = {**cfg, "widths": tuple(cfg["widths"])}
+    model = GTTNet(GTTNetConfig(**cfg))
+    try:
+        model.load_state_dict(payload.get("state_dict", payload.get("model")))
+    except RuntimeError as exc:
+        raise ModelError(f"{p}: weights do not match the stored config ({str(exc).splitlines()[0]})") from exc
+    return model.to(device).eval()
+
+
+class GTTNetReconstructor:
+    """Reconstruct with a trained GTT-Net from :class:`Observations` only (ground truth never enters).
+
+    Args:
+        model_path: Model file or run directory; None uses the bundled model.
+        device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
+    """
+
+    def __init__(self, model_path: str | Path | None = None, *, device: str = "auto") -> None:
+        if device == "auto":
+            device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = torch.device(device)
+        self.model = load_model(model_path, device=self.device)
+
+    @torch.no_grad()
+    def __call__(self, obs: Observations) -> Reconstruction:
+        """Reconstruct one capture.
+
+        Args:
+            obs: Observations of one sequencing condition.
+
+        Returns:
+            :class:`Reconstruction` with points3d (N, J, 3) in world metres and the sparse affinity A^S.
+        """
+        if not isinstance(obs, Observations):
+            raise TypeError(f"GTTNetReconstructor takes Observations, got {type(obs).__name__}")
+        seq = prepare_inputs(obs, k=self.model.config.k).to(self.device)
+        out = self.model([seq], solve=True)[0]
+        return Reconstruction(
+            points3d=out.x_est.double().cpu().numpy(),
+            affinity=out.a_sparse.double().cpu().numpy(),
+            info={"k": self.model.config.k, "top_q": self.model.config.top_q, "device": str(self.device)},
+        )
+
+
+_CACHE: dict[tuple[str, str], GTTNetReconstructor] = {}
+
+
+@register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
+def reconstruct_gttnet(obs: Observations, model: str | None = None) -> Reconstruction:
+    """GTT-Net with the bundled model, or the model file/run directory ``model``."""
+    key = (str(model), "auto")
+    if key not in _CACHE:
+        _CACHE[key] = GTTNetReconstructor(model)
+    rec = _CACHE[key](obs)
+    return Reconstruction(points3d=rec.points3d, affinity=np.asarray(rec.affinity), info=rec.info)

@@ -1,0 +1,118 @@
+"""Checkpoints: save and restore ALL training state (model, optimiser, cascade position, RNG, recipe)."""
+
+from __future__ import annotations
+
+import os
+import random
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+__all__ = [
+    "LoopState",
+    "rng_states",
+    "set_rng_states",
+    "save_checkpoint",
+    "load_checkpoint",
+    "CHECKPOINT_NAME",
+]
+
+CHECKPOINT_NAME = "checkpoint.pt"
+
+
+@dataclass
+class LoopState:
+    """Where the cascade is, and the schedule state of the current stage.
+
+    Args:
+        stage_index: Index of the running stage.
+        stage_step: Steps done in that stage.
+        global_step: Steps done over all stages.
+        keys_consumed: Training keys this rank has drawn from the data stream (data position).
+        lr: Current learning rate.
+        best_val: Best validation loss of the stage (plateau schedule).
+        bad_vals: Validations since the last improvement.
+        history: Logged records (train and validation), for the loss curve.
+    """
+
+    stage_index: int = 0
+    stage_step: int = 0
+    global_step: int = 0
+    keys_consumed: int = 0
+    lr: float = 0.0
+    best_val: float = float("inf")
+    bad_vals: int = 0
+    history: list[dict] = field(default_factory=list)
+
+
+def rng_states() -> dict:
+    """States of the python, numpy, torch and (when present) CUDA generators."""
+    out = {
+        "python": random.getstate(),
+        "numpy": np.random.get_state(),  # noqa: NPY002 (global state, saved for completeness)
+        "torch": torch.get_rng_state(),
+    }
+    if torch.cuda.is_available():
+        out["cuda"] = torch.cuda.get_rng_state_all()
+    return out
+
+
+def set_rng_states(states: dict) -> None:
+    """Restore generator states saved by :func:`rng_states`."""
+    random.setstate(states["python"])
+    np.random.set_state(states["numpy"])  # noqa: NPY002
+    torch.set_rng_state(states["torch"])
+    if "cuda" in states and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(states["cuda"])
+
+
+def save_checkpoint(
+    run_dir: str | Path,
+    *,
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    state: LoopState,
+    recipe: dict,
+) -> Path:
+    """Write ``run_dir/checkpoint.pt`` atomically (temporary file, then rename).
+
+    Args:
+        run_dir: Run directory.
+        model: The (unwrapped) model.
+        optimizer: The current stage's optimiser.
+        state: Cascade position and schedule.
+        recipe: The resolved recipe as a plain mapping.
+
+    Returns:
+        The checkpoint path.
+    """
+    path = Path(run_dir) / CHECKPOINT_NAME
+    tmp = path.with_suffix(".pt.tmp")
+    payload = {
+        "format": "gttnet-checkpoint/1",
+        "model": model.state_dict(),
+        "model_config": asdict(model.config),
+        "optimizer": optimizer.state_dict(),
+        "state": asdict(state),
+        "rng": rng_states(),
+        "recipe": recipe,
+    }
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def load_checkpoint(run_dir: str | Path) -> dict:
+    """Read ``run_dir/checkpoint.pt`` (CPU tensors) with ``state`` as a :class:`LoopState`.
+
+    Raises:
+        FileNotFoundError: If the run directory has no checkpoint.
+    """
+    path = Path(run_dir) / CHECKPOINT_NAME
+    if not path.is_file():
+        raise FileNotFoundError(2, "no checkpoint to resume from", str(path))
+    payload = torch.load(path, map_location="cpu", weights_only=False)
+    payload["state"] = LoopState(**payload["state"])
+    return payload

@@ -1,0 +1,398 @@
+"""The training loop: the cascade of stages as a for-loop over one data stream, with validation and checkpoints."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import random
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.distributed as dist
+import yaml
+from tqdm import tqdm
+
+from gttnet.data import EpochStream, SequenceDataset, TrainItem, collate_items, open_source
+from gttnet.model.inference import save_model
+from gttnet.model.inputs import random_rotation
+from gttnet.model.network import GTTNet, build_model
+from gttnet.train.checkpoint import LoopState, load_checkpoint, save_checkpoint, set_rng_states
+from gttnet.train.objective import StepObjective, stage_losses
+from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
+from gttnet.train.stages import Stage
+
+__all__ = ["RunResult", "select_device", "freeze_parts", "train"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunResult:
+    """Outcome of :func:`train`.
+
+    Args:
+        run_dir: The run directory.
+        state: Final loop state (history included).
+        model: The trained network.
+        finished: False when stopped early by ``max_steps`` (resume with ``resume=run_dir``).
+    """
+
+    run_dir: Path
+    state: LoopState
+    model: GTTNet
+    finished: bool
+
+
+def select_device(name: str, *, local_rank: int = 0) -> torch.device:
+    """``auto`` → CUDA when available (this process's local GPU under torchrun), else CPU."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError("device 'cuda' requested but CUDA is not available; use --device cpu or auto")
+        return torch.device("cuda", local_rank)
+    return torch.device(name)
+
+
+def freeze_parts(model: GTTNet, frozen: list[str]) -> list[torch.nn.Parameter]:
+    """Freeze the named parts (see :data:`~gttnet.train.stages.FREEZABLE`); returns the trainable parameters."""
+    parts = {
+        "unet": [model.unet],
+        "encoder": [model.unet.encoders, model.unet.enc_norms],
+        "decoder": [model.unet.decoders, model.unet.dec_norms],
+        "pointnet": [model.pointnet.point_mlp, model.pointnet.head] if model.pointnet is not None else [],
+        "pointnet_decoders": [model.pointnet.decoders] if model.pointnet is not None else [],
+    }
+    for p in model.parameters():
+        p.requires_grad_(True)
+    for name in frozen:
+        for module in parts[name]:
+            for p in module.parameters():
+                p.requires_grad_(False)
+    return [p for p in model.parameters() if p.requires_grad]
+
+
+def _git_sha() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5, check=False
+        )
+        return out.stdout.strip() or "unknown"
+    except OSError:
+        return "unknown"
+
+
+class _Logger:
+    """JSONL records (and TensorBoard scalars when installed), written by rank 0 only."""
+
+    def __init__(self, run_dir: Path, enabled: bool) -> None:
+        self.enabled, self.path, self.tb = enabled, run_dir / "log.jsonl", None
+        if enabled:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self.tb = SummaryWriter(str(run_dir / "tensorboard"))
+            except ImportError:
+                log.debug("tensorboard not installed: JSONL log only")
+
+    def write(self, record: dict) -> None:
+        if not self.enabled:
+            return
+        with self.path.open("a") as fh:
+            fh.write(json.dumps(record) + "\n")
+        if self.tb is not None:
+            for k, v in record.items():
+                if isinstance(v, int | float) and k not in ("step", "global_step", "stage_index"):
+                    self.tb.add_scalar(f"{record['kind']}/{k}", v, record["global_step"])
+
+
+def _stage_length(stage: Stage, steps_per_epoch: int) -> int:
+    return stage.steps if stage.steps is not None else stage.epochs * steps_per_epoch
+
+
+def _lr(stage: Stage, state: LoopState, total: int) -> float:
+    if stage.schedule == "cosine":
+        t = min(state.stage_step / max(total, 1), 1.0)
+        return stage.min_lr + (stage.lr - stage.min_lr) * 0.5 * (1.0 + math.cos(math.pi * t))
+    return state.lr
+
+
+@torch.no_grad()
+def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
+    model.eval()
+    totals, mpjpe, mpjpe_init = [], [], []
+    parts_sum: dict[str, float] = {}
+    for item in items:
+        out = model([item.inputs], solve=True)
+        total, parts = stage_losses(stage, model, [item], out)
+        totals.append(float(total))
+        for k, v in parts.items():
+            parts_sum[k] = parts_sum.get(k, 0.0) + float(v) / len(items)
+        mpjpe.append(float((out[0].x_est - item.points3d).norm(dim=-1).mean()) * 1000.0)
+        mpjpe_init.append(float((item.inputs.x_init - item.points3d).norm(dim=-1).mean()) * 1000.0)
+    model.train()
+    return {
+        "loss": float(np.mean(totals)),
+        "mpjpe_mm": float(np.mean(mpjpe)),
+        "mpjpe_init_mm": float(np.mean(mpjpe_init)),
+        **{f"loss_{k}": v for k, v in parts_sum.items()},
+    }
+
+
+def _plot(run_dir: Path, history: list[dict]) -> None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log.info("matplotlib not installed: no loss curve")
+        return
+    fig, ax = plt.subplots(figsize=(7, 4))
+    tr = [r for r in history if r["kind"] == "train"]
+    va = [r for r in history if r["kind"] == "val"]
+    ax.semilogy([r["global_step"] for r in tr], [r["loss"] for r in tr], label="train")
+    ax.semilogy([r["global_step"] for r in va], [r["loss"] for r in va], "o-", label="validation")
+    for r in tr:
+        if r["step"] == 1 and r["global_step"] > 1:
+            ax.axvline(r["global_step"], color="grey", lw=0.5)
+    ax.set_xlabel("step")
+    ax.set_ylabel("stage loss")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(run_dir / "loss_curve.png", dpi=100)
+    plt.close(fig)
+
+
+def _dist_setup(device_name: str) -> tuple[int, int, int]:
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1, 0
+    local = int(os.environ.get("LOCAL_RANK", "0"))
+    if not dist.is_initialized():
+        use_nccl = device_name != "cpu" and torch.cuda.is_available()
+        dist.init_process_group(backend="nccl" if use_nccl else "gloo")
+    return dist.get_rank(), dist.get_world_size(), local
+
+
+def _run_dir(recipe: TrainRecipe, out: str | Path | None, rank: int, world: int) -> Path:
+    path = [
+        str(out) if out else str(Path(recipe.out_dir) / f"{recipe.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    ]
+    if world > 1:
+        dist.broadcast_object_list(path, src=0)
+    return Path(path[0])
+
+
+@dataclass
+class _Context:
+    """Everything one training run shares between stages."""
+
+    recipe: TrainRecipe
+    run_dir: Path
+    model: GTTNet
+    dev: torch.device
+    dtype: torch.dtype
+    rank: int
+    world: int
+    logger: _Logger
+    batches: object
+    val_items: list[TrainItem]
+    steps_per_epoch: int
+
+
+def _prepare(
+    recipe: TrainRecipe, payload: dict | None, out, device: str | None
+) -> tuple[_Context, LoopState]:
+    device_name = device or recipe.train.device
+    rank, world, local = _dist_setup(device_name)
+    dev = select_device(device_name, local_rank=local)
+    dtype = torch.float64 if recipe.train.dtype == "float64" else torch.float32
+    run_dir = _run_dir(recipe, out, rank, world)
+    if rank == 0:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        if payload is None:
+            (run_dir / "recipe.yaml").write_text(yaml.safe_dump(recipe_to_dict(recipe), sort_keys=False))
+    logger = _Logger(run_dir, rank == 0)
+    random.seed(recipe.seed)
+    np.random.seed(recipe.seed)  # noqa: NPY002 (third-party code may use the global generator)
+    torch.manual_seed(recipe.seed)
+    model = build_model(recipe.model.builder, **recipe.model.settings).to(device=dev, dtype=dtype)
+    state = LoopState()
+    if payload is not None:
+        model.load_state_dict(payload["model"])
+        state = payload["state"]
+        set_rng_states(payload["rng"])
+    else:
+        logger.write({"kind": "meta", "global_step": 0, "git_sha": _git_sha(), "seed": recipe.seed,
+                      "device": str(dev), "world": world, "recipe": recipe_to_dict(recipe)})  # fmt: skip
+    n_params = sum(p.numel() for p in model.parameters())
+    log.info("run %s on %s (world %d): %d parameters", run_dir, dev, world, n_params)
+
+    spec = recipe.data
+    train_src = open_source(spec, spec.train_split)
+    n_train = len(train_src) if spec.max_train is None else min(spec.max_train, len(train_src))
+    common = {"k": model.config.k, "sequencing": spec.sequencing, "seed": recipe.seed, "cache": spec.cache}
+    train_set = SequenceDataset(train_src, variants=spec.variants, indices=range(n_train), **common)
+    val_src = open_source(spec, spec.val_split)
+    n_val = len(val_src) if spec.max_val is None else min(spec.max_val, len(val_src))
+    val_set = SequenceDataset(val_src, variants=spec.variants[:1], indices=range(n_val), **common)
+    val_items = [val_set[(i, 0, c)].to(dev, dtype) for i in range(n_val) for c in val_set.conditions]
+    per_rank = n_train // world
+    stream = EpochStream(n_train, seed=recipe.seed, rank=rank, world=world,
+                         start_epoch=state.keys_consumed // per_rank, start_pos=state.keys_consumed % per_rank)  # fmt: skip
+    loader = torch.utils.data.DataLoader(
+        train_set, batch_size=recipe.train.batch_size, sampler=stream, collate_fn=collate_items,
+        num_workers=spec.num_workers, persistent_workers=spec.num_workers > 0,
+    )  # fmt: skip
+    spe = recipe.train.steps_per_epoch or max(1, per_rank // recipe.train.batch_size)
+    ctx = _Context(recipe, run_dir, model, dev, dtype, rank, world, logger, iter(loader), val_items, spe)
+    return ctx, state
+
+
+def _step(ctx: _Context, step_fn, optimizer, trainable, stage: Stage, state: LoopState, lr: float):
+    items = [it.to(ctx.dev, ctx.dtype) for it in next(ctx.batches)]
+    rng = np.random.default_rng(np.random.SeedSequence([ctx.recipe.seed, 31337, state.global_step, ctx.rank]))
+    batch = []
+    for it in items:
+        R = torch.as_tensor(
+            random_rotation(rng, mode=ctx.recipe.train.rotation), dtype=ctx.dtype, device=ctx.dev
+        )
+        batch += [it, it.rotated(R)]
+    for group in optimizer.param_groups:
+        group["lr"] = lr
+    amp = ctx.recipe.train.amp and ctx.dev.type == "cuda"
+    with torch.autocast(device_type=ctx.dev.type, dtype=torch.bfloat16, enabled=amp):
+        loss, parts = step_fn(batch, stage)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if ctx.recipe.train.grad_clip is not None:
+        torch.nn.utils.clip_grad_norm_(trainable, ctx.recipe.train.grad_clip)
+    optimizer.step()
+    value = float(loss.detach())
+    if not math.isfinite(value):
+        raise FloatingPointError(f"stage {stage.name!r} step {state.stage_step + 1}: loss is {value}")
+    return value, {k: float(v.detach()) for k, v in parts.items()}, len(batch)
+
+
+def _validate_and_schedule(ctx: _Context, stage: Stage, si: int, state: LoopState, lr: float) -> None:
+    val = _validate(ctx.model, stage, ctx.val_items)
+    rec = {"kind": "val", "stage": stage.name, "stage_index": si, "step": state.stage_step,
+           "global_step": state.global_step, "lr": lr, **val}  # fmt: skip
+    state.history.append(rec)
+    ctx.logger.write(rec)
+    if val["loss"] < state.best_val * (1.0 - 1e-4):
+        state.best_val, state.bad_vals = val["loss"], 0
+        return
+    state.bad_vals += 1
+    if stage.schedule == "plateau" and state.bad_vals > stage.plateau_patience:
+        state.lr, state.bad_vals = max(state.lr * stage.plateau_factor, stage.min_lr), 0
+
+
+def _save(ctx: _Context, optimizer, state: LoopState) -> None:
+    if ctx.rank == 0:
+        save_checkpoint(
+            ctx.run_dir, model=ctx.model, optimizer=optimizer, state=state, recipe=recipe_to_dict(ctx.recipe)
+        )
+
+
+def _finish(ctx: _Context, state: LoopState) -> None:
+    if ctx.rank != 0:
+        return
+    last_val = next((r for r in reversed(state.history) if r["kind"] == "val"), {})
+    card = {"recipe": recipe_to_dict(ctx.recipe), "git_sha": _git_sha(), "steps": state.global_step,
+            "validation": last_val, "trained_on": str(ctx.dev), "world": ctx.world}  # fmt: skip
+    save_model(ctx.run_dir / "model.pt", ctx.model, card=card)
+    _plot(ctx.run_dir, state.history)
+
+
+def train(
+    recipe: TrainRecipe | None = None,
+    *,
+    out: str | Path | None = None,
+    device: str | None = None,
+    resume: str | Path | None = None,
+    max_steps: int | None = None,
+    progress: bool = True,
+) -> RunResult:
+    """Run (or resume) a training cascade: for each stage, Adam steps over the data stream.
+
+    Each step draws ``batch_size`` sequences and runs each twice (as captured and globally rotated, F^GR),
+    all packed into one network call; validation runs every epoch and at the end of every stage; a
+    checkpoint holding all state is written every ``checkpoint_every`` steps and at every stage's end.
+
+    Args:
+        recipe: The recipe; omitted when resuming (the run's resolved recipe is used).
+        out: Run directory (default ``recipe.out_dir/<name>-<time>``).
+        device: Overrides ``recipe.train.device`` (``auto``, ``cpu``, ``cuda``).
+        resume: A run directory holding ``checkpoint.pt``: continue exactly where it stopped.
+        max_steps: Stop (with a checkpoint) after this many steps in this call; None: run to the end.
+        progress: Show a tqdm progress bar.
+
+    Returns:
+        :class:`RunResult`.
+    """
+    payload = None
+    if resume is not None:
+        payload = load_checkpoint(resume)
+        recipe, out = parse_train_recipe(payload["recipe"]), resume
+    if recipe is None:
+        raise ValueError("train() needs a recipe or a run directory to resume")
+    ctx, state = _prepare(recipe, payload, out, device)
+    lengths = [_stage_length(s, ctx.steps_per_epoch) for s in recipe.stages]
+    bar = tqdm(
+        total=sum(lengths), initial=state.global_step, disable=not progress or ctx.rank != 0, unit="step"
+    )
+    objective = StepObjective(ctx.model)
+    done_here = 0
+    for si in range(state.stage_index, len(recipe.stages)):
+        stage, total = recipe.stages[si], lengths[si]
+        trainable = freeze_parts(ctx.model, stage.frozen)
+        optimizer = torch.optim.Adam(trainable, lr=stage.lr)
+        if payload is not None and state.stage_step > 0:
+            optimizer.load_state_dict(payload["optimizer"])
+        else:
+            state.stage_step, state.lr, state.best_val, state.bad_vals = 0, stage.lr, float("inf"), 0
+        payload = None
+        step_fn = objective
+        if ctx.world > 1:
+            ids = [ctx.dev.index] if ctx.dev.type == "cuda" else None
+            step_fn = torch.nn.parallel.DistributedDataParallel(
+                objective, device_ids=ids, find_unused_parameters=True
+            )
+        t_last, seqs = time.perf_counter(), 0
+        while state.stage_step < total:
+            if max_steps is not None and done_here >= max_steps:
+                _save(ctx, optimizer, state)
+                bar.close()
+                return RunResult(ctx.run_dir, state, ctx.model, finished=False)
+            lr = _lr(stage, state, total)
+            loss, parts, n_seq = _step(ctx, step_fn, optimizer, trainable, stage, state, lr)
+            state.stage_step, state.global_step = state.stage_step + 1, state.global_step + 1
+            state.keys_consumed += recipe.train.batch_size
+            done_here, seqs = done_here + 1, seqs + n_seq
+            bar.update(1)
+            if state.stage_step % recipe.train.log_every == 0 or state.stage_step in (1, total):
+                rate = seqs / max(time.perf_counter() - t_last, 1e-9)
+                rec = {"kind": "train", "stage": stage.name, "stage_index": si, "step": state.stage_step,
+                       "global_step": state.global_step, "lr": lr, "loss": loss,
+                       **{f"loss_{k}": v for k, v in parts.items()}, "seq_per_s": rate}  # fmt: skip
+                state.history.append(rec)
+                ctx.logger.write(rec)
+                bar.set_postfix(stage=stage.name, loss=f"{loss:.4g}", seq_s=f"{rate:.1f}")
+                t_last, seqs = time.perf_counter(), 0
+            if state.stage_step % ctx.steps_per_epoch == 0 or state.stage_step == total:
+                _validate_and_schedule(ctx, stage, si, state, lr)
+            if state.stage_step % recipe.train.checkpoint_every == 0 and state.stage_step < total:
+                _save(ctx, optimizer, state)
+        state.stage_index, state.stage_step = si + 1, 0
+        _save(ctx, optimizer, state)
+    bar.close()
+    _finish(ctx, state)
+    return RunResult(ctx.run_dir, state, ctx.model, finished=True)

@@ -1,0 +1,270 @@
+"""TrainRecipe: the typed form of a ``recipes/gttnet/*.yaml`` file, with ``key.sub=value`` overrides."""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from gttnet.errors import GttNetError
+from gttnet.train.stages import Stage
+
+__all__ = [
+    "RecipeError",
+    "ModelSpec",
+    "DataSpec",
+    "TrainSpec",
+    "TrainRecipe",
+    "load_train_recipe",
+    "parse_train_recipe",
+    "recipe_to_dict",
+]
+
+
+class RecipeError(GttNetError):
+    """A training recipe is malformed (names the key, what was expected and what was found)."""
+
+
+@dataclass
+class ModelSpec:
+    """Which network to build.
+
+    Args:
+        builder: Registered builder name (``gttnet_tiny``, ``gttnet_base``, ``gttnet_pointnet``).
+        settings: :class:`~gttnet.model.network.GTTNetConfig` fields overriding the builder's values.
+    """
+
+    builder: str = "gttnet_base"
+    settings: dict[str, typing.Any] = field(default_factory=dict)
+
+
+@dataclass
+class DataSpec:
+    """Where training sequences come from and how each is presented.
+
+    Args:
+        generate: The ``gttdata`` generate recipe describing the data.
+        generate_overrides: ``key=value`` overrides of that recipe.
+        source: ``"recipe"``: build every sample on the fly from the generate recipe (deterministic per
+            index, no disk); ``"shards"``: read shards under ``root``, generating them first when absent.
+        root: Shard directory for ``source: shards`` (default: the generate recipe's ``output_dir``).
+        train_split: Split used for training.
+        val_split: Held-out split used for validation.
+        sequencing: Relative frequency of each sequencing condition (none / partial / full) per item.
+        variants: Stored sample variants to draw from (``orig`` and augmentation names).
+        max_train: Use at most this many training samples (None: all).
+        max_val: Validate on at most this many samples (each under every condition with weight > 0).
+        num_workers: DataLoader worker processes (items are prepared in the workers).
+        cache: Keep prepared items in memory (per worker) after first use.
+    """
+
+    generate: str = "recipes/gttdata/tiny.yaml"
+    generate_overrides: list[str] = field(default_factory=list)
+    source: str = "recipe"
+    root: str | None = None
+    train_split: str = "train"
+    val_split: str = "val"
+    sequencing: dict[str, float] = field(default_factory=lambda: {"none": 1.0, "partial": 1.0, "full": 1.0})
+    variants: list[str] = field(default_factory=lambda: ["orig"])
+    max_train: int | None = None
+    max_val: int | None = 4
+    num_workers: int = 0
+    cache: bool = True
+
+
+@dataclass
+class TrainSpec:
+    """Loop settings shared by every stage.
+
+    Args:
+        batch_size: Sequences per optimiser step; each is run twice (as captured and rotated).
+        rotation: Global rotation of the second copy: ``so3``, ``yaw`` or ``none``.
+        device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
+        amp: Mixed precision (bfloat16 autocast) for the U-Net on CUDA; the DLOE layer stays float32.
+        dtype: Parameter dtype, ``float32`` or ``float64``.
+        grad_clip: Clip the gradient norm to this value (None: off).
+        log_every: Steps between log records.
+        checkpoint_every: Steps between checkpoints (each stage's end is always checkpointed).
+        steps_per_epoch: Steps that make one epoch (validation, plateau); None: one pass over the data.
+    """
+
+    batch_size: int = 2
+    rotation: str = "so3"
+    device: str = "auto"
+    amp: bool = False
+    dtype: str = "float32"
+    grad_clip: float | None = 1.0
+    log_every: int = 10
+    checkpoint_every: int = 200
+    steps_per_epoch: int | None = None
+
+
+@dataclass
+class TrainRecipe:
+    """A complete training recipe.
+
+    Args:
+        name: Recipe name (run directory prefix).
+        seed: Seed of the model initialisation, data order, sequencing draws and rotations.
+        out_dir: Parent directory of run directories.
+        model: :class:`ModelSpec`.
+        data: :class:`DataSpec`.
+        train: :class:`TrainSpec`.
+        stages: The cascade, run in order.
+    """
+
+    name: str
+    stages: list[Stage]
+    seed: int = 0
+    out_dir: str = "runs"
+    model: ModelSpec = field(default_factory=ModelSpec)
+    data: DataSpec = field(default_factory=DataSpec)
+    train: TrainSpec = field(default_factory=TrainSpec)
+
+    def __post_init__(self) -> None:
+        if not self.stages:
+            raise ValueError("stages must hold at least one stage")
+        if self.data.source not in ("recipe", "shards"):
+            raise ValueError(f"data.source must be 'recipe' or 'shards', got {self.data.source!r}")
+        bad = sorted(set(self.data.sequencing) - {"none", "partial", "full"})
+        if bad or not any(w > 0 for w in self.data.sequencing.values()):
+            raise ValueError(
+                f"data.sequencing must weight some of none/partial/full, got {self.data.sequencing}"
+            )
+        if self.train.device not in ("auto", "cpu", "cuda"):
+            raise ValueError(f"train.device must be auto, cpu or cuda, got {self.train.device!r}")
+        if self.train.dtype not in ("float32", "float64"):
+            raise ValueError(f"train.dtype must be float32 or float64, got {self.train.dtype!r}")
+
+
+def _type_name(tp: object) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _convert(tp: object, value: object, key: str) -> object:
+    origin = typing.get_origin(tp)
+    if tp is typing.Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _convert(a, value, key)
+            except RecipeError as exc:
+                errors.append(str(exc))
+        raise RecipeError(errors[0] if errors else f"{key}: unexpected {value!r}")
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, key)
+    if origin is list:
+        if not isinstance(value, list):
+            raise RecipeError(f"{key}: expected a list, found {value!r}")
+        (item,) = typing.get_args(tp)
+        return [_convert(item, v, f"{key}.{i}") for i, v in enumerate(value)]
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise RecipeError(f"{key}: expected a mapping, found {value!r}")
+        _, vt = typing.get_args(tp)
+        return {str(k): _convert(vt, v, f"{key}.{k}") for k, v in value.items()}
+    return _convert_scalar(tp, value, key)
+
+
+def _convert_scalar(tp: object, value: object, key: str) -> object:
+    is_num = isinstance(value, int | float) and not isinstance(value, bool)
+    if tp is float and is_num:
+        return float(value)
+    if (tp is int and is_num and float(value).is_integer()) or (tp in (bool, str) and isinstance(value, tp)):
+        return int(value) if tp is int else value
+    raise RecipeError(f"{key}: expected {_type_name(tp)}, found {value!r}")
+
+
+def _build(cls: type, data: object, key: str) -> object:
+    if not isinstance(data, dict):
+        raise RecipeError(f"{key or 'recipe'}: expected a mapping, found {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        where = f"{key}.{unknown[0]}" if key else unknown[0]
+        raise RecipeError(f"{where}: unknown key; expected one of {', '.join(names)}")
+    kwargs = {k: _convert(hints[k], v, f"{key}.{k}" if key else k) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise RecipeError(f"{key or 'recipe'}: {exc}") from exc
+    except ValueError as exc:
+        raise RecipeError(f"{key or 'recipe'}: {exc}") from exc
+
+
+def _apply_override(data: dict, item: str) -> None:
+    if "=" not in item:
+        raise RecipeError(f"override {item!r}: expected key.sub=value, e.g. stages.0.steps=10")
+    path, raw = item.split("=", 1)
+    value = yaml.safe_load(raw) if raw.strip() else None
+    parts = path.strip().split(".")
+    node: object = data
+    for i, p in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, list):
+            if not p.isdigit() or int(p) >= len(node):
+                raise RecipeError(f"override {path}: {p!r} is not an index of a list of {len(node)}")
+            if last:
+                node[int(p)] = value
+            else:
+                node = node[int(p)]
+        elif isinstance(node, dict):
+            if last:
+                node[p] = value
+            else:
+                node = node.setdefault(p, {})
+        else:
+            raise RecipeError(f"override {path}: {'.'.join(parts[:i])} is not a mapping or list")
+
+
+def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe:
+    """Build a :class:`TrainRecipe` from a plain mapping and ``key.sub=value`` overrides.
+
+    Raises:
+        RecipeError: On an unknown key, a wrong type or an invalid value (one line naming the key).
+    """
+    data = yaml.safe_load(yaml.safe_dump(data)) or {}
+    for item in overrides:
+        _apply_override(data, item)
+    return typing.cast(TrainRecipe, _build(TrainRecipe, data, ""))
+
+
+def load_train_recipe(path: str | Path, overrides: Sequence[str] = ()) -> TrainRecipe:
+    """Load a YAML training recipe.
+
+    Args:
+        path: Recipe file.
+        overrides: ``key.sub=value`` strings (values parsed as YAML), applied in order.
+
+    Raises:
+        RecipeError: If the file is not a mapping or does not validate.
+    """
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise RecipeError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
+    if not isinstance(data, dict):
+        raise RecipeError(f"{p}: expected a mapping at the top level")
+    try:
+        return parse_train_recipe(data, overrides)
+    except RecipeError as exc:
+        raise RecipeError(f"{p}: {exc}") from exc
+
+
+def recipe_to_dict(recipe: TrainRecipe) -> dict:
+    """Plain (YAML/JSON-serialisable) form of a recipe; ``parse_train_recipe`` inverts it."""
+    return dataclasses.asdict(recipe)

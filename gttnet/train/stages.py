@@ -1,0 +1,76 @@
+"""Stage: one step of the training cascade (losses and weights, length, schedule, frozen parts)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["Stage", "LOSS_NAMES", "AFFINITY_TARGETS", "FREEZABLE", "SCHEDULES"]
+
+#: Loss names a stage may weight: ℓ^AE, ℓ^A, ℓ^X, ℓ^S, ℓ^P.
+LOSS_NAMES: tuple[str, ...] = ("autoencoding", "affinity", "structure", "smoothness", "pointnet")
+#: A^G used by ℓ^A: ground-truth interpolation weights, 0/1 temporal adjacency, or observation-only labels.
+AFFINITY_TARGETS: tuple[str, ...] = ("continuous", "binary", "pseudo")
+#: Model parts a stage may freeze.
+FREEZABLE: tuple[str, ...] = ("unet", "encoder", "decoder", "pointnet", "pointnet_decoders")
+#: Learning-rate schedules.
+SCHEDULES: tuple[str, ...] = ("plateau", "constant", "cosine")
+
+
+@dataclass
+class Stage:
+    """One stage of the cascade; the loop runs stages in order with a fresh optimiser each.
+
+    Args:
+        name: Stage name (logs, checkpoints).
+        losses: Weight of each loss in :data:`LOSS_NAMES`; losses not named are not computed.
+        steps: Optimiser steps in this stage (exactly one of ``steps`` / ``epochs``).
+        epochs: Passes over the training set in this stage.
+        lr: Adam learning rate.
+        schedule: One of :data:`SCHEDULES`. ``plateau`` multiplies the lr by ``plateau_factor`` when the
+            validation loss has not improved for ``plateau_patience`` validations.
+        plateau_factor: Factor of a plateau step (paper: halve).
+        plateau_patience: Validations without improvement before a plateau step.
+        min_lr: Lower bound of the learning rate.
+        frozen: Parts in :data:`FREEZABLE` kept fixed in this stage.
+        affinity_target: A^G for ℓ^A, one of :data:`AFFINITY_TARGETS`.
+        norm: ``"mse"`` (squared Frobenius / count) or ``"fro"`` (non-squared, as the reference code).
+    """
+
+    name: str
+    losses: dict[str, float]
+    steps: int | None = None
+    epochs: int | None = None
+    lr: float = 1e-3
+    schedule: str = "plateau"
+    plateau_factor: float = 0.5
+    plateau_patience: int = 2
+    min_lr: float = 1e-6
+    frozen: list[str] = field(default_factory=list)
+    affinity_target: str = "continuous"
+    norm: str = "mse"
+
+    def __post_init__(self) -> None:
+        bad = sorted(set(self.losses) - set(LOSS_NAMES))
+        if bad:
+            raise ValueError(f"stage {self.name!r}: unknown loss {bad[0]!r}; expected one of {LOSS_NAMES}")
+        if not self.losses:
+            raise ValueError(f"stage {self.name!r}: losses must name at least one of {LOSS_NAMES}")
+        if (self.steps is None) == (self.epochs is None):
+            raise ValueError(f"stage {self.name!r}: give exactly one of steps or epochs")
+        if (self.steps or self.epochs or 0) < 1:
+            raise ValueError(f"stage {self.name!r}: steps/epochs must be >= 1")
+        for key, value, allowed in (
+            ("schedule", self.schedule, SCHEDULES),
+            ("affinity_target", self.affinity_target, AFFINITY_TARGETS),
+            ("norm", self.norm, ("mse", "fro")),
+        ):
+            if value not in allowed:
+                raise ValueError(f"stage {self.name!r}: {key} must be one of {allowed}, got {value!r}")
+        bad = sorted(set(self.frozen) - set(FREEZABLE))
+        if bad:
+            raise ValueError(f"stage {self.name!r}: cannot freeze {bad[0]!r}; expected one of {FREEZABLE}")
+
+    @property
+    def needs_solver(self) -> bool:
+        """Whether a loss of this stage needs the DLOE layer's X^E."""
+        return any(self.losses.get(k, 0.0) != 0.0 for k in ("structure", "smoothness"))
