@@ -80,9 +80,9 @@ def _split(recipe: GenerateRecipe, split: str) -> SplitSpec:
 
 def _resolve(pattern: str) -> str:
     if pattern.startswith(CACHE_PREFIX):
-        from gttdata.mocap.fetch import default_cache_dir
+        from gttdata.mocap.fetch import cache_dir
 
-        return str(default_cache_dir() / pattern[len(CACHE_PREFIX) :].lstrip("/"))
+        return str(cache_dir() / pattern[len(CACHE_PREFIX) :].lstrip("/"))
     return os.path.expanduser(os.path.expandvars(pattern))
 
 
