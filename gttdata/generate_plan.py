@@ -289,6 +289,8 @@ def _scene_motions(recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.rando
             sep = float(scene.subject_separation_m.draw(rng))
             along = (np.arange(len(subjects)) - (len(subjects) - 1) / 2) * sep
             offsets = along[:, None] * np.array([np.cos(heading), np.sin(heading), 0.0])
+            for rec, off in zip(records[-len(subjects) :], offsets, strict=True):
+                rec["offset_m"] = off.tolist()
             events.append(merge_subjects(subjects, offsets))
         else:
             events.append(subjects[0])

@@ -113,6 +113,8 @@ def test_events_and_multi_subject_recipes():
     assert ms.n_joints == 62 and ms.meta["n_subjects"] == 2
     roots = ms.points3d[:, [0, 31], :2].mean(axis=0)
     assert 1.5 - 1e-6 <= np.linalg.norm(roots[0] - roots[1]) <= 3.0 + 0.5
+    offsets = np.array([m["offset_m"] for m in ms.meta["motions"]])
+    assert 1.5 <= np.linalg.norm(offsets[0] - offsets[1]) <= 3.0
 
 
 def test_file_sources_and_file_rig(tmp_path: Path):
