@@ -143,6 +143,21 @@ def _stream_index(cam: np.ndarray) -> np.ndarray:
     return si
 
 
+def _event_affinity(
+    t: np.ndarray, cam: np.ndarray, points: np.ndarray, event: np.ndarray, n_events: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ground-truth temporal neighbours computed within each event, so two events are never linked."""
+    nbr = np.full((t.shape[0], 2), -1, dtype=np.int32)
+    w = np.zeros((t.shape[0], 2))
+    for e in range(n_events):
+        idx = np.flatnonzero(event == e)
+        if idx.size:
+            nb, ww = temporal_affinity(t[idx], cam[idx], points[idx])
+            nbr[idx] = np.where(nb >= 0, idx[np.maximum(nb, 0)], -1)
+            w[idx] = ww
+    return nbr, w
+
+
 def _simulate(
     segments: Sequence[tuple[Motion, float]],
     rig: CameraRig,
@@ -183,14 +198,7 @@ def _simulate(
     visible = visible_in_camera(gt_px, depth, size[cam]) & drop_joints(
         (n, sk.n_joints), rng, rate=params.joint_drop_rate
     )
-    nbr = np.full((n, 2), -1, dtype=np.int32)
-    w = np.zeros((n, 2))
-    for e in range(len(segments)):  # disjoint events are never linked in the ground-truth affinity
-        idx = np.flatnonzero(event == e)
-        if idx.size:
-            nb, ww = temporal_affinity(t[idx], cam[idx], points[idx])
-            nbr[idx] = np.where(nb >= 0, idx[np.maximum(nb, 0)], -1)
-            w[idx] = ww
+    nbr, w = _event_affinity(t, cam, points, event, len(segments))
     meta = {
         "capture": params.to_dict(),
         "offsets_s": offsets.tolist(),
