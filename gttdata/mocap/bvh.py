@@ -13,8 +13,11 @@ Conventions:
       rotation about x; right-handed, forward ``+z_bvh`` becomes ``-y_world``). Pass
       ``up_axis="z"`` for files that are already z-up.
     * Units: ``scale`` metres per file unit. By default the CMU conversions (joint names matching
-      ``CMU31_BVH_ALIASES``) use 0.0254 / 0.45 (CMU's 1/0.45 inch) and any other file 0.01
-      (centimetres, the most common BVH unit).
+      ``CMU31_BVH_ALIASES``) use 0.0254 / 0.45 (CMU's 1/0.45 inch). Any other file gets the unit
+      among metres, centimetres and millimetres (a factor 10 apart) that makes the figure's height,
+      the 95th percentile over frames of the joints' vertical extent, closest to 1.5 m in log scale
+      (:func:`guess_scale_m`; Boxing_Toes: 153 units, so centimetres). A height outside
+      0.8-2.5 m after scaling warns: inches, feet or non-human figures need an explicit ``scale``.
 """
 
 from __future__ import annotations
@@ -33,13 +36,17 @@ from gttdata.mocap import register_loader
 from gttdata.mocap.motion import Motion
 from gttdata.skeleton import CMU31_BVH_ALIASES, Skeleton, cmu31
 
-__all__ = ["CMU_BVH_SCALE_M", "BvhData", "forward_kinematics", "load_bvh", "parse_bvh"]
+__all__ = ["CMU_BVH_SCALE_M", "BvhData", "forward_kinematics", "guess_scale_m", "load_bvh", "parse_bvh"]
 
 _log = logging.getLogger(__name__)
 
 #: Metres per CMU length unit (1/0.45 inch), REFERENCE.md.
 CMU_BVH_SCALE_M: float = 0.0254 / 0.45
-_DEFAULT_SCALE_M = 0.01
+#: Candidate units of non-CMU files for the automatic scale, metres per unit.
+_AUTO_UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: Joints' vertical extent of a standing adult (stature less the head top and the soles), metres.
+_TYPICAL_EXTENT_M = 1.5
+_PLAUSIBLE_EXTENT_M = (0.8, 2.5)
 _CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
 
@@ -335,13 +342,36 @@ def _skeleton_for(path: Path, data: BvhData) -> tuple[Skeleton, np.ndarray | Non
     return sk, None
 
 
+def guess_scale_m(positions: np.ndarray, up: int) -> tuple[float, str]:
+    """Metres per file unit of a human figure, from its height (heuristic in the module docstring).
+
+    Args:
+        positions: Joint positions in file units and axes, shape ``(T, J, 3)``.
+        up: Index of the file's up axis (1 for y-up BVH, 2 for z-up).
+
+    Returns:
+        ``(scale, unit)``, e.g. ``(0.01, "cm")``.
+
+    Example:
+        >>> pos = np.zeros((1, 2, 3)); pos[0, 1, 1] = 160.0
+        >>> guess_scale_m(pos, up=1)
+        (0.01, 'cm')
+    """
+    extent = float(np.percentile(np.ptp(positions[..., up], axis=1), 95))
+    if not extent > 0:
+        return _AUTO_UNITS["cm"], "cm"
+    unit = min(_AUTO_UNITS, key=lambda u: abs(math.log(extent * _AUTO_UNITS[u] / _TYPICAL_EXTENT_M)))
+    return _AUTO_UNITS[unit], unit
+
+
 @register_loader("bvh", suffixes=(".bvh",))
 def load_bvh(path: str | Path, *, scale: float | None = None, up_axis: str = "y") -> Motion:
     """Load a BVH file as joint positions in metres, world z-up.
 
     Args:
         path: BVH file.
-        scale: Metres per file unit; ``None`` picks 0.0254/0.45 for CMU-31 files, else 0.01.
+        scale: Metres per file unit; ``None`` picks 0.0254/0.45 for CMU-31 files, else the unit
+            (m, cm or mm) that gives a human height (:func:`guess_scale_m`).
         up_axis: ``"y"`` (BVH default, converted to z-up) or ``"z"`` (kept).
 
     Returns:
@@ -357,11 +387,26 @@ def load_bvh(path: str | Path, *, scale: float | None = None, up_axis: str = "y"
     data = parse_bvh(path)
     skeleton, order = _skeleton_for(path, data)
     is_cmu = order is not None
-    if scale is None:
-        scale = CMU_BVH_SCALE_M if is_cmu else _DEFAULT_SCALE_M
+    pos = forward_kinematics(data)
+    if scale is not None:
+        scale_source = "argument"
+    elif is_cmu:
+        scale, scale_source = CMU_BVH_SCALE_M, "cmu"
+    else:
+        scale, unit = guess_scale_m(pos, up=1 if up_axis == "y" else 2)
+        scale_source = f"auto:{unit}"
+        extent = float(np.percentile(np.ptp(pos[..., 1 if up_axis == "y" else 2], axis=1), 95)) * scale
+        lo, hi = _PLAUSIBLE_EXTENT_M
+        if not lo <= extent <= hi:
+            warnings.warn(
+                f"{path}: figure height {extent:.2f} m with the guessed unit {unit!r} is outside "
+                f"{lo}-{hi} m; pass scale (metres per file unit) if the file is not in m, cm or mm",
+                stacklevel=3,
+            )
+        _log.info("%s: no scale given; file units read as %s (figure height %.2f m)", path, unit, extent)
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be > 0 metres per unit, got {scale}")
-    pos = forward_kinematics(data) * scale
+    pos = pos * scale
     if order is not None:
         pos = pos[:, order]
     if up_axis == "y":
@@ -378,6 +423,7 @@ def load_bvh(path: str | Path, *, scale: float | None = None, up_axis: str = "y"
             "path": str(path),
             "format": "bvh",
             "scale_m_per_unit": scale,
+            "scale_source": scale_source,
             "up_axis": up_axis,
             "frame_time_s": data.frame_time_s,
             "cmu31": is_cmu,

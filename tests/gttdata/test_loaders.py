@@ -189,8 +189,33 @@ def test_bvh_frame_count_mismatch_warns_and_trusts_rows(tmp_path):
     f = tmp_path / "mismatch.bvh"
     f.write_text(_bvh_text(_CHAIN, np.zeros((3, 11)), frames=2))
     with pytest.warns(UserWarning, match="header says 2 frames but the file holds 3 rows"):
-        m = load_motion(f)
+        m = load_motion(f, scale=0.01)
     assert m.n_frames == 3
+
+
+@pytest.mark.parametrize(("unit", "per_m"), [("m", 1.0), ("cm", 100.0), ("mm", 1000.0)])
+def test_bvh_auto_scale_reads_a_human_height(tmp_path, unit, per_m):
+    """A 1.7 m two-joint figure written in m, cm or mm loads at 1.7 m without a scale argument."""
+    joints = [
+        ("Hips", -1, (0, 0, 0), ["Xposition", "Yposition", "Zposition"]),
+        ("Head", 0, (0, 1.7 * per_m, 0), []),
+    ]
+    f = tmp_path / f"fig_{unit}.bvh"
+    f.write_text(_bvh_text(joints, np.zeros((2, 3))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = load_motion(f)
+    assert m.provenance["scale_source"] == f"auto:{unit}"
+    np.testing.assert_allclose(m.positions[0, 1], [0.0, 0.0, 1.7], atol=1e-12)
+    assert load_motion(f, scale=2.0 / per_m).provenance["scale_source"] == "argument"
+
+
+def test_bvh_auto_scale_warns_when_no_unit_gives_a_human(tmp_path):
+    joints = [("Hips", -1, (0, 0, 0), ["Xposition", "Yposition", "Zposition"]), ("Head", 0, (0, 5.0, 0), [])]
+    f = tmp_path / "giant.bvh"
+    f.write_text(_bvh_text(joints, np.zeros((1, 3))))
+    with pytest.warns(UserWarning, match="figure height 5.00 m with the guessed unit 'm'.*pass scale"):
+        load_motion(f)
 
 
 def _good_bvh() -> str:
