@@ -271,6 +271,8 @@ def test_real_fetch_then_show(tmp_path, monkeypatch):
         pytest.skip("neither the Debian packages nor apt-get are available")
     monkeypatch.setenv("GTT_CACHE", str(tmp_path / "cache"))
     r = CliRunner().invoke(main, ["motions", "fetch"])
+    if r.exit_code == 1 and "apt-get download" in r.output and "failed" in r.output:
+        pytest.skip(f"no Debian mirror reachable: {r.output.strip().splitlines()[-1]}")
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, ["motions", "show", "01_01.bvh"])
     assert r.exit_code == 0, r.output
