@@ -17,7 +17,7 @@ def _check_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarra
     if gt.shape != pred.shape:
         raise ValueError(f"gt must have the shape of pred {pred.shape}, got {gt.shape}")
     if pred.shape[0] == 0 or pred.shape[1] == 0:
-        raise ValueError(f"pred must hold at least one image and one joint, got {pred.shape}")
+        raise ValueError(f"pred must have shape (N, J, 3) with N, J >= 1, got {pred.shape}")
     return pred, gt
 
 

@@ -1,0 +1,71 @@
+"""Spectral sequence recovery: chains, shuffles, disconnected graphs and input checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gttnet.evaluate.metrics import kendall_tau
+from gttnet.geometry.ordering import graph_components, spectral_order
+
+
+def _chain(n: int, perm: np.ndarray) -> np.ndarray:
+    """Affinity of a path visiting images perm[0], perm[1], ... (true rank of image perm[k] is k)."""
+    A = np.zeros((n, n))
+    A[perm[:-1], perm[1:]] = 1.0
+    return A  # directed on purpose: spectral_order symmetrises
+
+
+def test_shuffled_chain_recovered_exactly():
+    rng = np.random.default_rng(0)
+    n = 40
+    perm = rng.permutation(n)
+    rank = np.empty(n, dtype=int)
+    rank[perm] = np.arange(n)
+    order = spectral_order(_chain(n, perm))
+    assert sorted(order.tolist()) == list(range(n))
+    assert kendall_tau(order, rank) == pytest.approx(1.0)
+
+
+def test_direction_follows_image_index():
+    n = 10
+    order = spectral_order(_chain(n, np.arange(n)[::-1]))
+    np.testing.assert_array_equal(order, np.arange(n))
+
+
+def test_noisy_chain_mostly_ordered():
+    rng = np.random.default_rng(2)
+    n = 60
+    A = _chain(n, np.arange(n)) + np.diag(np.ones(n - 2), 2) * 0.5  # plus second neighbours
+    a, b = rng.integers(0, n, size=(2, 4))
+    A[a, b] += 0.01  # a few weak long-range shortcuts
+    assert kendall_tau(spectral_order(A), np.arange(n)) > 0.95
+
+
+def test_disconnected_components_largest_first():
+    n = 9
+    A = np.zeros((n, n))
+    for a, b in [(5, 6), (6, 7), (7, 8), (0, 2), (2, 4), (1, 3)]:
+        A[a, b] = 1.0
+    labels = graph_components(A)
+    assert labels.tolist() == [1, 2, 1, 2, 1, 0, 0, 0, 0]
+    order = spectral_order(A)
+    # component {5,6,7,8} first (largest), then {0,2,4}, then {1,3}
+    np.testing.assert_array_equal(order[[5, 6, 7, 8]], [0, 1, 2, 3])
+    np.testing.assert_array_equal(order[[0, 2, 4]], [4, 5, 6])
+    np.testing.assert_array_equal(order[[1, 3]], [7, 8])
+
+
+def test_isolated_images_and_empty():
+    order = spectral_order(np.zeros((3, 3)))
+    np.testing.assert_array_equal(order, [0, 1, 2])
+    assert spectral_order(np.zeros((0, 0))).shape == (0,)
+
+
+@pytest.mark.parametrize(
+    ("A", "match"),
+    [(np.zeros((3, 2)), "shape"), (-np.eye(3), "non-negative"), (np.full((2, 2), np.nan), "finite")],
+)
+def test_bad_affinity(A, match):
+    with pytest.raises(ValueError, match=match):
+        spectral_order(A)
