@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from gttdata.mocap.procedural._body import Body
-from gttdata.mocap.procedural._track import Track, smooth_noise
+from gttdata.mocap.procedural._body import JOINT, Body
+from gttdata.mocap.procedural._track import Track, smooth_noise, smootherstep
 
 __all__ = ["GAIT_SPEEDS_MPS", "gait_track"]
 
 #: Nominal speed range of each locomotion kind, m/s.
 GAIT_SPEEDS_MPS: dict[str, tuple[float, float]] = {
-    "walk": (0.9, 1.7),
+    "walk": (0.85, 1.45),
     "turn": (0.7, 1.4),
     "jog": (2.0, 2.9),
     "run": (3.0, 4.2),
@@ -31,7 +31,7 @@ def _periodic(keys: list[tuple[float, float]]) -> CubicSpline:
 # gait data for walking and Novacheck's for running). Walk: toe-off at ~62 %; run: toe-off at ~38 %.
 _WALK = {
     "hip": _periodic([(0, 28), (12, 24), (35, 4), (53, -11), (65, 2), (85, 31), (95, 30)]),
-    "knee": _periodic([(0, 4), (15, 18), (40, 5), (60, 38), (72, 62), (87, 30), (97, 3)]),
+    "knee": _periodic([(0, 4), (15, 17), (40, 5), (60, 36), (72, 58), (89, 25)]),
     "ankle": _periodic([(0, 0), (8, -6), (25, 4), (45, 10), (56, 0), (63, -16), (75, -4), (88, 2)]),
 }
 _RUN = {
@@ -60,7 +60,7 @@ def _legs(track: Track, s_left: np.ndarray, mode: str, amp: np.ndarray, style: d
         track.add(side + "femur", 1, 10.0 + amp * (hip - 10.0))
         track.add(side + "tibia", 1, amp * knee + (1.0 - amp) * style["knee_bend"])
         track.add(side + "foot", 1, amp * ankle)
-        stance = np.clip(np.sin(np.pi * np.clip(s / _STANCE_FRACTION[mode], 0.0, 1.0)), 0.0, 1.0)
+        stance = np.sin(np.pi * np.clip(s / _STANCE_FRACTION[mode], 0.0, 1.0)) ** 2
         track.add(side + "femur", 0, style["hip_abd"] - 4.0 * stance)
         track.add(side + "femur", 2, -style["toe_out"])
         track.add(side + "foot", 2, -0.5 * style["toe_out"])
@@ -88,8 +88,28 @@ def _upper_body(track: Track, s_left: np.ndarray, mode: str, amp: np.ndarray, st
         track.add(side + "humerus", 1, style["arm_flex"] + swing)
         track.add(side + "humerus", 0, style["arm_abd"] + (4.0 if run else 0.0))
         track.add(side + "humerus", 2, style["arm_rot"])
-        track.add(side + "radius", 1, style["elbow"] + 0.5 * np.maximum(swing, 0.0))
+        # Softplus rather than max(swing, 0): the elbow bends on the forward swing without a kink.
+        track.add(side + "radius", 1, style["elbow"] + 0.25 * (swing + np.sqrt(swing * swing + 25.0)))
         track.add(side + "wrist", 1, 8.0)
+
+
+def _foot_loads(s_left: np.ndarray, mode: str, stance: float) -> np.ndarray:
+    """Load on (lfoot, ltoes, rfoot, rtoes) from the gait phase: heel first, then the ball of the foot.
+
+    Walking hands the load from the trailing to the leading foot over double support (the first
+    12 % of each stance); running loads each foot only during its own stance.
+    """
+    loads = []
+    for s in (s_left % 1.0, (s_left + 0.5) % 1.0):
+        if mode == "walk":
+            ramp = stance - 0.5  # double support: the first (stance - 0.5) of each stance
+            on = smootherstep(s / ramp) * (1.0 - smootherstep((s - 0.5) / ramp))
+            heel = 1.0 - smootherstep((s - 0.25) / 0.2)
+        else:
+            on = smootherstep(s / 0.04) * (1.0 - smootherstep((s - stance + 0.04) / 0.04))
+            heel = 0.5 * (1.0 - smootherstep((s - 0.05) / 0.1))
+        loads += [on * heel, on * (1.0 - heel)]
+    return np.stack(loads, axis=1)
 
 
 def _style(rng: np.random.Generator, mode: str) -> dict:
@@ -164,7 +184,7 @@ def gait_track(
     # Range of motion that gives the target stride at this cadence (calibrated on the reference body).
     ref = 1.35 if mode == "walk" else 3.3
     amp = (
-        np.clip(speed / ref * 0.91 / leg, 0.25, 1.35)
+        np.clip(speed / ref * 0.91 / leg, 0.25, 1.1)
         if mode == "walk"
         else np.clip(0.55 + 0.45 * speed / ref, 0.6, 1.3)
     )
@@ -175,6 +195,11 @@ def gait_track(
     lean = np.rad2deg(np.arctan(speed * yaw_rate / 9.81))
     track.add("root", 0, lean)
     track.add("upperneck", 2, np.rad2deg(0.35 * yaw_rate))
+    # Hip angles are relative to the pelvis: cancel pelvic tilt and list so that they move the trunk,
+    # not the feet (otherwise the stance foot would be dragged and the root would surge).
+    tilt, side = np.rad2deg(track.angles[:, JOINT["root"], 1]), np.rad2deg(track.angles[:, JOINT["root"], 0])
+    track.add_sides("femur", 1, tilt, tilt)
+    track.add_sides("femur", 0, side, -side)
     track.yaw_rate = yaw_rate
     noise = smooth_noise(rng, t, 12, max_hz=0.8)
     for k, (j, axis, deg) in enumerate(
@@ -183,8 +208,10 @@ def gait_track(
          ("upperback", 1, 2.0), ("thorax", 2, 3.0), ("upperneck", 2, 8.0), ("head", 1, 5.0))
     ):  # fmt: skip
         track.add(j, axis, deg * noise[:, k])
+    stance = _STANCE_FRACTION[mode] + (0.07 if kind == "jog" else 0.0)
+    track.contact = _foot_loads(s_left, mode, stance)
+    track.contact_mix[:] = 1.0
     if mode == "run":
-        stance = _STANCE_FRACTION["run"] + (0.07 if kind == "jog" else 0.0)
         in_stance = ((s_left % 1.0) < stance) | (((s_left + 0.5) % 1.0) < stance)
         track.support = in_stance.astype(np.float64)
     return track, {"speed_mps": float(speed0), "in_place": in_place}

@@ -15,6 +15,8 @@ _G_MPS2 = 9.81
 _CONTACT_SOFTNESS_M = 0.006
 # Half-width of the window over which the root blends between stance and flight, seconds.
 _FLIGHT_BLEND_S = 0.04
+# Window over which the root speed of gaits is averaged, seconds.
+_GAIT_AVERAGING_S = 1.1
 
 
 def _softmin(h: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
@@ -23,6 +25,16 @@ def _softmin(h: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
     e = np.exp(-(h - m) / tau)
     s = e.sum(axis=-1, keepdims=True)
     return (m - tau * np.log(s))[..., 0], e / s
+
+
+def _hann_smooth(x: np.ndarray, half: int) -> np.ndarray:
+    """Hann-window moving average along axis 0 with edge padding, same shape as ``x``."""
+    if half < 1:
+        return x
+    win = np.hanning(2 * half + 3)[1:-1]
+    win /= win.sum()
+    pad = np.pad(x, ((half, half),) + ((0, 0),) * (x.ndim - 1), mode="edge")
+    return np.stack([np.convolve(pad[:, k], win, mode="valid") for k in range(x.shape[1])], axis=1)
 
 
 def _flight_gaps(support: np.ndarray) -> list[tuple[int, int]]:
@@ -38,11 +50,7 @@ def _stance_weight(support: np.ndarray, gaps: list[tuple[int, int]], half: int) 
     mask = np.ones(support.size)
     for a, b in gaps:
         mask[a:b] = 0.0
-    if half < 1:
-        return mask
-    win = np.hanning(2 * half + 3)[1:-1]
-    win /= win.sum()
-    return np.convolve(np.pad(mask, half, mode="edge"), win, mode="valid")
+    return _hann_smooth(mask[:, None], half)[:, 0]
 
 
 def _bridge(y: np.ndarray, gaps: list[tuple[int, int]], half: int, dt: float, gravity: float) -> np.ndarray:
@@ -105,7 +113,14 @@ def place_on_ground(track: Track, body: Body, *, initial_heading: float) -> tupl
     # Foot locking in the heading frame: v_root = -(d/dt foot + yaw_rate x foot) of the supporting foot.
     foot_vel = np.gradient(feet[..., :2], dt, axis=0)
     spin = track.yaw_rate[:, None, None] * np.stack([-feet[..., 1], feet[..., 0]], axis=-1)
+    known = track.contact / np.maximum(track.contact.sum(axis=1, keepdims=True), 1e-6)
+    mix = track.contact_mix[:, None] * (track.contact.sum(axis=1, keepdims=True) > 1e-6)
+    w_feet = mix * known + (1.0 - mix) * w_feet
     v_lock = -np.einsum("tf,tfc->tc", w_feet, foot_vel + spin)
+    # Hand-tuned gait cycles do not keep the stance foot's speed exactly constant; averaging over
+    # about two steps trades some centimetres of foot slip for a realistic, steady pelvis speed.
+    half_avg = int(round(_GAIT_AVERAGING_S * track.fps_hz / 2))
+    v_lock += track.contact_mix[:, None] * (_hann_smooth(v_lock, half_avg) - v_lock)
     v_air = _bridge(v_lock, gaps, half, dt, 0.0) + track.flight_vel
     v_body = w[:, None] * v_lock + (1.0 - w[:, None]) * v_air
     c, s = np.cos(heading), np.sin(heading)

@@ -9,7 +9,7 @@ from scipy.interpolate import PchipInterpolator
 
 from gttdata.mocap.procedural._body import JOINT, SIGNS
 
-__all__ = ["Track", "keyframes", "smooth_noise", "smootherstep"]
+__all__ = ["Track", "keyframes", "segment_weights", "smooth_noise", "smootherstep"]
 
 
 @dataclass
@@ -25,6 +25,9 @@ class Track:
         support: 1 where the feet carry the body, 0 in flight (running, jumping), shape ``(T,)``.
         flight_vel: Extra horizontal root velocity during flight in the heading frame (x forward,
             y left), m/s, shape ``(T, 2)``.
+        contact: Load carried by each foot joint of ``FOOT_JOINTS`` (lfoot, ltoes, rfoot, rtoes)
+            where the generator knows it (gait phases), shape ``(T, 4)``; rows sum to 1 or 0.
+        contact_mix: How far to trust ``contact`` over the lowest-foot rule, in [0, 1], shape ``(T,)``.
     """
 
     fps_hz: float
@@ -32,6 +35,8 @@ class Track:
     yaw_rate: np.ndarray
     support: np.ndarray
     flight_vel: np.ndarray
+    contact: np.ndarray
+    contact_mix: np.ndarray
 
     @classmethod
     def zeros(cls, n_frames: int, fps_hz: float) -> Track:
@@ -42,6 +47,8 @@ class Track:
             yaw_rate=np.zeros(n_frames),
             support=np.ones(n_frames),
             flight_vel=np.zeros((n_frames, 2)),
+            contact=np.zeros((n_frames, 4)),
+            contact_mix=np.zeros(n_frames),
         )
 
     @property
@@ -111,3 +118,11 @@ def keyframes(times_s: np.ndarray, key_times_s: np.ndarray, key_values: np.ndarr
     """
     t = np.clip(times_s, key_times_s[0], key_times_s[-1])
     return PchipInterpolator(key_times_s, key_values, axis=0)(t)
+
+
+def segment_weights(t: np.ndarray, bounds: list[float], fade_s: float) -> np.ndarray:
+    """Partition of unity over segments ``[bounds[i], bounds[i+1])`` with C2 cross-fades, ``(T, S)``."""
+    ramps = [smootherstep((t - b + 0.5 * fade_s) / fade_s) for b in bounds[1:-1]]
+    up = [np.ones_like(t), *ramps]
+    down = [*(1.0 - r for r in ramps), np.ones_like(t)]
+    return np.stack([a * b for a, b in zip(up, down, strict=True)], axis=1)
