@@ -100,7 +100,7 @@ def _gesture(
     abd, flex, rot, elbow, wrist = (rng.uniform(lo, hi) for lo, hi in spec["arm"])
     sgn = 1.0 if side == "l" else -1.0
     if spec.get("osc"):
-        f = rng.uniform(1.5, 2.5) * tempo
+        f = rng.uniform(1.2, 2.2) * tempo
         osc = np.sin(2.0 * np.pi * f * track.times_s + rng.uniform(0, 2 * np.pi))
         rot = rot + 18.0 * osc
         elbow = elbow + 12.0 * osc
@@ -124,7 +124,7 @@ def _gesture_sequence(
     start, done = rng.uniform(0.2, 1.0), []
     while start < t[-1] - 1.0:
         name = str(rng.choice(names))
-        rise, fall = rng.uniform(0.4, 0.8) / tempo, rng.uniform(0.4, 0.9) / tempo
+        rise, fall = rng.uniform(0.6, 1.0) / tempo, rng.uniform(0.6, 1.1) / tempo
         hold = rng.uniform(0.6, 2.5) * pace
         env = _envelope(t, start, rise, hold, fall)
         both = name in ("hands_on_hips", "arms_crossed", "reach_up") and rng.uniform() < 0.6

@@ -26,8 +26,8 @@ def _jump_keys(t0: float, flight_s: float, depth: float, lean: float, tempo: flo
     d2 = 0.6 * depth + 0.2
     return [
         (t0 - 0.95 / tempo, *_stand()),
-        (t0 - 0.32 / tempo, 5 + 10 * depth, 55 * depth, 90 * depth, _NAN, 20 * depth + lean, -50.0, 20.0),
-        (t0, 5.0, -5.0 - 10.0 * lean / 15.0, 5.0, -30.0, 5.0 + lean / 3.0, 140.0, 20.0),
+        (t0 - 0.36 / tempo, 5 + 10 * depth, 55 * depth, 90 * depth, _NAN, 20 * depth + lean, -40.0, 20.0),
+        (t0, 5.0, -5.0 - 10.0 * lean / 15.0, 5.0, -30.0, 5.0 + lean / 3.0, 115.0, 20.0),
         (t0 + 0.5 * flight_s, 5.0, 15.0 + 10 * depth, 25.0 + 30 * depth, -20.0, 5.0, 150.0, 30.0),
         (land, 5.0, 20.0, 20.0, -15.0, 5.0, 90.0, 30.0),
         (land + 0.22 / tempo, 10 * d2, 40 * d2, 70 * d2, _NAN, 15 * d2, 40.0, 35.0),
@@ -92,7 +92,7 @@ def jump_track(
     Returns:
         ``(track, params)``: the track and the jumps drawn (height, distance, turn per jump).
     """
-    tempo = speed_scale if speed_scale is not None else rng.uniform(0.85, 1.2)
+    tempo = speed_scale if speed_scale is not None else rng.uniform(0.85, 1.1)
     track = Track.zeros(n_frames, fps_hz)
     t = track.times_s
     end = t[-1]
