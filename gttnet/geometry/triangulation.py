@@ -84,23 +84,42 @@ def closest_points_on_rays(
 
 
 def _pair_block(
-    rows: np.ndarray, rT: np.ndarray, mT: np.ndarray, rC: np.ndarray, C: np.ndarray, vis_T: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Closest-point quantities of rows ``rows`` against every image, all shaped ``(J, B, N)``."""
-    ri = rT[:, rows]  # (J, B, 3)
-    b = ri @ rT.transpose(0, 2, 1)  # r_i . r_j
-    # d = r_i . (C_i - C_j), e = r_j . (C_i - C_j): cross terms are (J,B,3)@(3,N) matmuls.
-    d = rC[:, rows, None] - ri @ C.T
-    e = (rT @ C[rows].T).transpose(0, 2, 1) - rC[:, None, :]
-    triple = mT[:, rows] @ rT.transpose(0, 2, 1) + ri @ mT.transpose(0, 2, 1)
-    sin2 = 1.0 - b * b
-    ok = vis_T[:, rows, None] & vis_T[:, None, :] & (sin2 > _PARALLEL_EPS)
-    inv = 1.0 / np.where(ok, sin2, 1.0)
-    s = (b * e - d) * inv
-    t = (e - b * d) * inv
-    ok &= (s > 0) & (t > 0)
-    err = np.abs(triple) * np.sqrt(inv) / np.where(ok, s + t, 1.0)
-    return ok, err, b, s
+    rows: slice, cols: slice, rT: np.ndarray, mT: np.ndarray, rC: np.ndarray, C: np.ndarray, cam: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validity, error and ``r_i . r_j`` of images ``rows`` against images ``cols``, each ``(J, B, Nc)``.
+
+    Missing rays are zero vectors, so their depths come out exactly 0 and fail the positive-depth test:
+    no separate visibility mask is needed. Operations are in place to limit memory traffic.
+    """
+    ri, rj = rT[:, rows], rT[:, cols]
+    rjt = rj.transpose(0, 2, 1)
+    b = ri @ rjt  # r_i . r_j
+    # d = r_i . (C_i - C_j), e = r_j . (C_i - C_j): the cross terms are (J,B,3)@(3,Nc) matmuls.
+    d = ri @ C[cols].T
+    np.subtract(rC[:, rows, None], d, out=d)
+    e = (rj @ C[rows].T).transpose(0, 2, 1)
+    e -= rC[:, None, cols]
+    gap = mT[:, rows] @ rjt
+    gap += ri @ mT[:, cols].transpose(0, 2, 1)  # Pluecker product m_i . r_j + r_i . m_j
+    sin2 = np.multiply(b, b)
+    np.subtract(1.0, sin2, out=sin2)
+    ok = sin2 > _PARALLEL_EPS
+    ok &= (cam[rows, None] != cam[None, cols])[None]
+    np.maximum(sin2, _PARALLEL_EPS, out=sin2)
+    s = b * e
+    s -= d  # s * sin2
+    t = b * d
+    np.subtract(e, t, out=t)  # t * sin2
+    ok &= s > 0
+    ok &= t > 0
+    s += t  # (s + t) * sin2
+    np.sqrt(sin2, out=sin2)
+    # err = |gap_num| / sqrt(sin2) / (s + t) = |gap_num| sqrt(sin2) / ((s + t) sin2)
+    np.abs(gap, out=gap)
+    gap *= sin2
+    s[~ok] = 1.0
+    gap /= s
+    return ok, gap, b
 
 
 def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np.ndarray) -> np.ndarray:
@@ -198,19 +217,23 @@ def pseudo_triangulate(
     rT = np.ascontiguousarray(np.where(vis[..., None], r, 0.0).transpose(1, 0, 2))  # (J, N, 3)
     mT = np.cross(C[None], rT)
     rC = np.einsum("jnk,nk->jn", rT, C)
-    vis_T = vis.T
     cost = np.full((n, n), np.inf)
     conv = np.full((n, n), np.nan)
     valid = np.zeros((n, n, j), dtype=bool)
+    # The cost, validity and convergence are symmetric: compute the upper block triangle and mirror.
     for start in range(0, n, block_rows):
-        rows = np.arange(start, min(start + block_rows, n))
-        ok, err, b, _ = _pair_block(rows, rT, mT, rC, C, vis_T)
-        ok &= (cam[rows, None] != cam[None, :])[None]
+        rows, cols = slice(start, min(start + block_rows, n)), slice(start, n)
+        ok, err, b = _pair_block(rows, cols, rT, mT, rC, C, cam)
         cnt = ok.sum(0)
+        err[~ok] = 0.0
+        b[~ok] = 0.0
         with np.errstate(invalid="ignore", divide="ignore"):
-            cost[rows] = np.where(cnt > 0, np.where(ok, err, 0.0).sum(0) / cnt, np.inf)
-            conv[rows] = np.where(cnt > 0, np.where(ok, b, 0.0).sum(0) / cnt, np.nan)
-        valid[rows] = ok.transpose(1, 2, 0)
+            c_blk = np.where(cnt > 0, err.sum(0) / cnt, np.inf)
+            v_blk = np.where(cnt > 0, b.sum(0) / cnt, np.nan)
+        cost[rows, cols], conv[rows, cols] = c_blk, v_blk
+        cost[cols, rows], conv[cols, rows] = c_blk.T, v_blk.T
+        valid[rows, cols] = ok.transpose(1, 2, 0)
+        valid[cols, rows] = ok.transpose(2, 1, 0)
     if not np.isfinite(cost).any():
         raise GttNetError(
             "pseudo-triangulation found no triangulable joint: need >= 2 cameras sharing a joint"

@@ -101,8 +101,27 @@ def _linear_term(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
     return q
 
 
+def _block_diag_term(V0, VE, nE, W, n):
+    """Per-image ``v_a^T W_n v_b`` blocks split as (slot-0 diagonal, slot-0 x extra, extra x extra)."""
+    s = V0.shape[0]
+    ar = torch.arange(s, device=V0.device)[:, None]
+    WV0 = (W @ V0.unsqueeze(-1)).squeeze(-1)  # (S, N, 3)
+    d00 = (V0 * WV0).sum(-1)
+    d0E_val = (WV0[ar, nE] * VE).sum(-1)  # (S, E): pairs (image nE_e slot 0, extra e)
+    d0E = torch.zeros(s, n, VE.shape[1], dtype=V0.dtype, device=V0.device).scatter(
+        1, nE.unsqueeze(1), d0E_val.unsqueeze(1)
+    )
+    WVE = (W[ar, nE] @ VE.unsqueeze(-1)).squeeze(-1)
+    dEE = (VE @ WVE.transpose(-1, -2)) * (nE.unsqueeze(-1) == nE.unsqueeze(-2))
+    return d00, d0E, dEE
+
+
 def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
     """Batched dense Cholesky over the active unknowns of every system; autograd-friendly.
+
+    Unknowns are ordered as every image's slot 0 (its depth, or x when missing) in image order, then
+    the extra slots of the system, padded to the largest count. The slot-0 block is then a plain
+    elementwise product with M (no gather), which keeps assembly cheap next to the factorisation.
 
     Args:
         M: Laplacian part, shape ``(B, N, N)``.
@@ -112,22 +131,30 @@ def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
         X, shape ``(B, N, J, 3)``.
     """
     s, n, _ = sys.active.shape
-    flat = sys.active.reshape(s, 3 * n)
-    count = flat.sum(1)
-    smax = int(count.max())
-    order = torch.argsort((~flat).to(torch.int8), dim=1, stable=True)[:, :smax]
-    pad = torch.arange(smax, device=M.device).unsqueeze(0) >= count.unsqueeze(1)
-    na = order // 3
-    Va = sys.V.reshape(s, 3 * n, 3).gather(1, order.unsqueeze(-1).expand(s, smax, 3))
-    b_of = torch.arange(sys.batch, device=M.device).repeat_interleave(sys.joints)
-    H = M[b_of[:, None, None], na[:, :, None], na[:, None, :]] * (Va @ Va.transpose(-1, -2))
+    b, j = sys.batch, sys.joints
+    extra = sys.active[:, :, 1:].reshape(s, 2 * n)
+    count = extra.sum(1)
+    emax = int(count.max()) if s else 0
+    order = torch.argsort((~extra).to(torch.int8), dim=1, stable=True)[:, :emax]
+    pad = torch.arange(emax, device=M.device).unsqueeze(0) >= count.unsqueeze(1)
+    nE, sE = order // 2, order % 2 + 1
+    ar = torch.arange(s, device=M.device)[:, None]
+    V0 = sys.V[:, :, 0]
+    VE = sys.V[ar, nE, sE]  # (S, E, 3), zero on pads (inactive slots)
+    M4 = M.unsqueeze(1).expand(b, j, n, n)
+    H00 = (M4 * (V0 @ V0.transpose(-1, -2)).view(b, j, n, n)).reshape(s, n, n)
+    ME = M4.gather(-1, nE.view(b, j, 1, emax).expand(b, j, n, emax)).reshape(s, n, emax)
+    H0E = ME * (V0 @ VE.transpose(-1, -2))
+    HEE = ME.gather(1, nE.unsqueeze(-1).expand(s, emax, emax)) * (VE @ VE.transpose(-1, -2))
     if sys.W is not None:
-        Wa = sys.W[torch.arange(s, device=M.device)[:, None], na]  # (S, smax, 3, 3)
-        WV = (Wa @ Va.unsqueeze(-1)).squeeze(-1)
-        H = H + (Va @ WV.transpose(-1, -2)) * (na.unsqueeze(-1) == na.unsqueeze(-2))
-    H = H + torch.diag_embed(pad.to(H.dtype))
+        d00, d0E, dEE = _block_diag_term(V0, VE, nE, sys.W, n)
+        H00 = H00 + torch.diag_embed(d00)
+        H0E = H0E + d0E
+        HEE = HEE + dEE
+    HEE = HEE + torch.diag_embed(pad.to(M.dtype))
+    H = torch.cat([torch.cat([H00, H0E], -1), torch.cat([H0E.transpose(-1, -2), HEE], -1)], -2)
     q = _linear_term(M, sys)
-    rhs = (Va * q.gather(1, na.unsqueeze(-1).expand(s, smax, 3))).sum(-1, keepdim=True)
+    rhs = torch.cat([(V0 * q).sum(-1), (VE * q[ar, nE]).sum(-1)], -1).unsqueeze(-1)
     L, info = torch.linalg.cholesky_ex(H)
     if bool((info != 0).any()):
         warnings.warn(
@@ -138,9 +165,11 @@ def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
         z = torch.linalg.solve(H, rhs)
     else:
         z = torch.cholesky_solve(rhs, L)
-    pos = (torch.cumsum(flat.long(), 1) - 1).clamp(min=0)
-    zf = z.squeeze(-1).gather(1, pos) * flat
-    return sys.to_points(zf.reshape(s, n, 3))
+    z = z.squeeze(-1)
+    # Pads map to inactive slots (zero direction), so scattering their zero values is harmless.
+    zE = torch.zeros(s, 2 * n, dtype=z.dtype, device=z.device).scatter(1, order, z[:, n:])
+    zf = torch.cat([z[:, :n].unsqueeze(-1), zE.view(s, n, 2)], -1)
+    return sys.to_points(zf)
 
 
 def _assemble(Mb: np.ndarray, nz, V: np.ndarray, active: np.ndarray, W: np.ndarray | None):
