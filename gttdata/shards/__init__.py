@@ -1,1 +1,10 @@
-"""shards."""
+"""HDF5 shards of CaptureSamples: layout (schema), writer, readers."""
+
+from __future__ import annotations
+
+from gttdata.shards.collection import DatasetReader
+from gttdata.shards.reader import ShardReader
+from gttdata.shards.schema import SCHEMA_VERSION
+from gttdata.shards.writer import ShardInfo, ShardWriter
+
+__all__ = ["SCHEMA_VERSION", "DatasetReader", "ShardInfo", "ShardReader", "ShardWriter"]

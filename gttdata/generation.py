@@ -1,0 +1,321 @@
+"""generate_dataset: turn a recipe into a directory of deterministic HDF5 shards and a manifest, in parallel, resumably."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import logging
+import multiprocessing as mp
+import queue as queue_mod
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from gttdata import __version__
+from gttdata.errors import ManifestError, RecipeError, ShardFormatError
+from gttdata.generate_plan import build_sample, n_samples, validate_inputs
+from gttdata.manifest import (
+    MANIFEST_NAME,
+    Manifest,
+    build_manifest,
+    file_sha256,
+    load_manifest,
+    scan_shards,
+    verify_manifest,
+    write_manifest,
+)
+from gttdata.recipe import GenerateRecipe, recipe_hash, recipe_to_dict
+from gttdata.shards.reader import ShardReader
+from gttdata.shards.schema import SHARD_SUFFIX, TMP_SUFFIX, shard_file_name
+from gttdata.shards.writer import ShardWriter
+
+__all__ = ["BlockPlan", "generate_dataset", "parse_shard_range", "plan_blocks", "storage_attrs"]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """One unit of work: block ``shard_index`` of ``split`` holds samples ``[first_index, first_index + n_samples)``.
+
+    Args:
+        split: Split name.
+        shard_index: Block index k within the split.
+        first_index: ``k * samples_per_shard``.
+        n_samples: Samples in the block (the last block of a split may be short).
+    """
+
+    split: str
+    shard_index: int
+    first_index: int
+    n_samples: int
+
+
+def plan_blocks(recipe: GenerateRecipe) -> list[BlockPlan]:
+    """Every block of the dataset: splits in recipe order, then block index (the ``--shard-range`` index)."""
+    size = recipe.shard.samples_per_shard
+    out = []
+    for split, n in n_samples(recipe).items():
+        for k in range((n + size - 1) // size):
+            out.append(BlockPlan(split, k, k * size, min(size, n - k * size)))
+    return out
+
+
+def parse_shard_range(text: str | tuple[int, int] | None, n_blocks: int) -> range:
+    """Blocks selected by ``"a:b"`` (Python slice semantics, either end optional) or ``"a"`` (one block).
+
+    Raises:
+        RecipeError: Malformed text, naming the expected form and the number of blocks.
+    """
+    if text is None:
+        return range(n_blocks)
+    if isinstance(text, tuple):
+        return range(n_blocks)[slice(*text)]
+    a, sep, b = str(text).partition(":")
+    try:
+        lo = int(a) if a.strip() else None
+        hi = int(b) if b.strip() else None
+    except ValueError as exc:
+        raise RecipeError(
+            f"--shard-range: expected 'a:b' with integers (0 <= a < b <= {n_blocks}), found {text!r}"
+        ) from exc
+    if not sep:
+        hi = None if lo is None else lo + 1
+    return range(n_blocks)[slice(lo, hi)]
+
+
+def storage_attrs(recipe: GenerateRecipe) -> dict:
+    """Root attributes every shard of ``recipe`` carries: generator, recipe hash and canonical recipe JSON.
+
+    ``output_dir`` is cleared first: where a dataset is written does not change its content, so the
+    same recipe gives byte-identical shards in any directory.
+    """
+    stored = replace(recipe, output_dir="")
+    return {
+        "generator": f"gttdata {__version__}",
+        "recipe_hash": recipe_hash(stored),
+        "recipe": json.dumps(recipe_to_dict(stored), sort_keys=True, separators=(",", ":")),
+    }
+
+
+def _block_files(split_dir: Path, k: int) -> tuple[list[Path], list[Path]]:
+    """Final and temporary files of block ``k`` (parts in order)."""
+    stem = shard_file_name(k)[: -len(SHARD_SUFFIX)]
+    finals = sorted(
+        split_dir.glob(f"{stem}.p*{SHARD_SUFFIX}"), key=lambda p: int(p.name.split(".p")[1].split(".")[0])
+    )
+    first = split_dir / shard_file_name(k)
+    finals = ([first] if first.exists() else []) + finals
+    tmps = sorted(split_dir.glob(f"{stem}*{SHARD_SUFFIX}{TMP_SUFFIX}"))
+    return finals, tmps
+
+
+def _write_block(recipe: GenerateRecipe, plan: BlockPlan, out_dir: str, attrs: dict, progress=None) -> int:
+    """Worker: build and write one block; returns the number of images written. Spawn-safe (module level)."""
+    split_dir = Path(out_dir) / plan.split
+    split_dir.mkdir(parents=True, exist_ok=True)
+    finals, tmps = _block_files(split_dir, plan.shard_index)
+    for p in finals + tmps:  # stale parts of an earlier run must not survive next to the new ones
+        p.unlink()
+    n_images = 0
+    with ShardWriter(
+        split_dir,
+        split=plan.split,
+        shard_index=plan.shard_index,
+        first_index=plan.first_index,
+        max_samples=plan.n_samples,
+        max_bytes=recipe.shard.max_bytes,
+        compression=recipe.shard.compression,
+        attrs=attrs,
+        parts=True,
+        rename_on_close=False,
+    ) as writer:
+        for i in range(plan.first_index, plan.first_index + plan.n_samples):
+            group = build_sample(recipe, plan.split, i)
+            writer.write(group)
+            n_images += group[0].n_images
+            if progress is not None:
+                progress(group[0].n_images)
+    return n_images
+
+
+def _block_ok(out_dir: Path, plan: BlockPlan, attrs: dict, known: dict[str, str]) -> str | None:
+    """Why block ``plan`` on disk cannot be kept (None when it is complete and intact)."""
+    finals, _ = _block_files(out_dir / plan.split, plan.shard_index)
+    if not finals:
+        return "missing"
+    nxt = plan.first_index
+    for part, path in enumerate(finals):
+        rel = path.relative_to(out_dir).as_posix()
+        if rel in known and file_sha256(path) != known[rel]:
+            return f"{rel}: sha256 differs from the previous manifest"
+        try:
+            with ShardReader(path) as reader:
+                a = reader.attrs
+                if a.get("recipe_hash") != attrs["recipe_hash"]:
+                    return f"{rel}: written by another recipe"
+                if (a.get("part"), a.get("first_index"), a.get("split")) != (part, nxt, plan.split):
+                    return f"{rel}: part {a.get('part')} first_index {a.get('first_index')} out of sequence"
+                reader.check()
+                nxt += len(reader)
+        except ShardFormatError as exc:
+            return str(exc)
+    if nxt != plan.first_index + plan.n_samples:
+        return f"holds {nxt - plan.first_index} of {plan.n_samples} samples"
+    return None
+
+
+def _check_foreign(out_dir: Path, attrs: dict) -> None:
+    """Refuse to mix shards of two recipes in one directory."""
+    for path in scan_shards(out_dir)[0]:
+        try:
+            with ShardReader(path) as reader:
+                found = reader.attrs.get("recipe_hash")
+        except ShardFormatError:
+            continue  # unreadable: its block is regenerated (resume) or overwritten
+        if found != attrs["recipe_hash"]:
+            raise ManifestError(
+                f"{path}: recipe_hash: expected {attrs['recipe_hash'][:12]} (this recipe), found {str(found)[:12]}; "
+                "write each recipe to its own output directory (--out) or delete the old shards"
+            )
+
+
+def _run_blocks(recipe, todo: list[BlockPlan], out_dir: Path, attrs: dict, workers: int, bar) -> None:
+    def tick(n_images: int) -> None:
+        bar.update(1)
+        bar.images += n_images
+
+    if workers <= 1 or len(todo) <= 1:
+        for plan in todo:
+            _write_block(recipe, plan, str(out_dir), attrs, tick)
+        return
+    ctx = mp.get_context("spawn")  # h5py and forked HDF5 state do not mix; spawn works everywhere
+    with ctx.Manager() as manager, cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        q = manager.Queue()
+        futures = [pool.submit(_write_block, recipe, plan, str(out_dir), attrs, q.put) for plan in todo]
+        pending = set(futures)
+        try:
+            while pending:
+                done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_EXCEPTION)
+                _drain(q, tick)
+                for f in done:
+                    f.result()  # re-raise the first worker error here
+        except BaseException:
+            for f in pending:
+                f.cancel()
+            raise
+        _drain(q, tick)
+
+
+def _drain(q, tick) -> None:
+    while True:
+        try:
+            tick(q.get_nowait())
+        except queue_mod.Empty:
+            return
+
+
+class _Bar:
+    """tqdm progress over samples with images/s in the postfix (a no-op without tqdm or when disabled)."""
+
+    def __init__(self, total: int, enabled: bool, desc: str) -> None:
+        self.images, self._bar = 0, None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, unit="sample", desc=desc, dynamic_ncols=True, smoothing=0.1)
+
+    def update(self, n: int) -> None:
+        if self._bar is not None:
+            self._bar.update(n)
+            rate = self._bar.format_dict.get("rate")
+            if rate and self._bar.n:
+                self._bar.set_postfix_str(f"{rate * self.images / self._bar.n:.0f} img/s", refresh=False)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _previous_manifest(out_dir: Path) -> dict[str, str]:
+    """SHA-256 per shard of an existing manifest (removed: the shards are about to change)."""
+    path = out_dir / MANIFEST_NAME
+    if not path.exists():
+        return {}
+    try:
+        known = {e.path: e.sha256 for e in load_manifest(path).shards}
+    except ManifestError:
+        known = {}
+    path.unlink(missing_ok=True)
+    return known
+
+
+def generate_dataset(
+    recipe: GenerateRecipe,
+    *,
+    workers: int = 1,
+    shard_range: str | tuple[int, int] | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> Manifest | None:
+    """Generate the shards of ``recipe`` into ``recipe.output_dir``, then write its manifest.
+
+    Block k of split s holds samples ``[k*S, (k+1)*S)`` (S = ``shard.samples_per_shard``) and is written
+    by one task; a block that would exceed ``shard.max_bytes`` continues in part files
+    ``shard-0000k.p1.h5``... Rollover points depend only on the block's content, so the files are
+    byte-identical for any ``workers`` and any ``shard_range`` split. Parts of a block are renamed from
+    last to first after all were fsynced: ``shard-0000k.h5`` exists only when its block is complete.
+
+    Args:
+        recipe: A validated recipe.
+        workers: Processes (spawn); 1 runs in this process.
+        shard_range: Blocks to write, ``"a:b"`` over :func:`plan_blocks` (for array jobs); None: all.
+        resume: Keep blocks already on disk that verify (recipe hash, sample coverage, every chunk's
+            Fletcher-32 checksum re-read, SHA-256 against a previous manifest when there is one);
+            regenerate the rest. Without it, blocks in range are rewritten.
+        progress: Show a tqdm progress bar (samples/s, images/s, ETA) on stderr.
+
+    Returns:
+        The written and verified manifest, or None when blocks outside ``shard_range`` are still
+        missing (the job that completes the dataset writes it; so does ``gttdata manifest DIR``).
+
+    Raises:
+        RecipeError: Missing motion files or a bad ``shard_range``.
+        ManifestError: The output directory holds shards of another recipe, or the written dataset
+            does not verify.
+        OSError: Unwritable output or full disk (temporary files are removed).
+    """
+    out_dir = Path(recipe.output_dir)
+    validate_inputs(recipe)
+    blocks = plan_blocks(recipe)
+    selected = [blocks[i] for i in parse_shard_range(shard_range, len(blocks))]
+    attrs = storage_attrs(recipe)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _check_foreign(out_dir, attrs)
+    known = _previous_manifest(out_dir)
+    todo = []
+    for plan in selected:
+        why = _block_ok(out_dir, plan, attrs, known) if resume else "not resuming"
+        if why is None:
+            _log.info("%s block %d: verified, kept", plan.split, plan.shard_index)
+        else:
+            if resume:
+                _log.info("%s block %d: regenerating (%s)", plan.split, plan.shard_index, why)
+            todo.append(plan)
+    _log.info(
+        "%s: %d blocks in range, %d to write with %d workers", recipe.name, len(selected), len(todo), workers
+    )
+    bar = _Bar(sum(p.n_samples for p in todo), progress, recipe.name)
+    try:
+        _run_blocks(recipe, todo, out_dir, attrs, workers, bar)
+    finally:
+        bar.close()
+    missing = [p for p in blocks if not (out_dir / p.split / shard_file_name(p.shard_index)).exists()]
+    if missing:
+        _log.info("%d of %d blocks still missing; manifest not written yet", len(missing), len(blocks))
+        return None
+    manifest = build_manifest(out_dir)
+    write_manifest(manifest, out_dir)
+    problems = verify_manifest(out_dir, manifest)
+    if problems:
+        raise ManifestError(f"{out_dir}: the written dataset does not verify: {problems[0]}")
+    return manifest

@@ -1,0 +1,287 @@
+"""ShardReader: lazy, picklable random access to the CaptureSamples of one HDF5 shard."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+from h5py import h5d, h5s
+
+from gttdata.capture.sample import CaptureSample
+from gttdata.errors import MotionFormatError, ShardFormatError
+from gttdata.shards.schema import (
+    SAMPLE_FIELDS,
+    SAMPLES_GROUP,
+    VARIANT_FIELDS,
+    VARIANTS_GROUP,
+    check_schema_version,
+)
+from gttdata.skeleton import Skeleton
+
+__all__ = ["ShardReader"]
+
+_log = logging.getLogger(__name__)
+
+# In-memory dtypes of the CaptureSample fields (the stored dtype may be narrower; see schema.py).
+_MEMORY_DTYPES = {
+    "cam_id": np.int32,
+    "timestamp_s": np.float64,
+    "stream_index": np.int32,
+    "global_order": np.int32,
+    "keypoints_px": np.float32,
+    "visible": np.bool_,
+    "keypoints_gt_px": np.float32,
+    "K": np.float64,
+    "cam_from_world": np.float64,
+    "image_size": np.int32,
+    "points3d": np.float64,
+    "affinity_nbr": np.int32,
+    "affinity_w": np.float64,
+    "variant_from_orig": np.float64,
+}
+
+
+def _attr_str(attrs: h5py.AttributeManager, key: str, where: str) -> str:
+    if key not in attrs:
+        raise ShardFormatError(f"{where}: attribute {key!r} is missing")
+    value = attrs[key]
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _attr_json(attrs: h5py.AttributeManager, key: str, where: str):
+    text = _attr_str(attrs, key, where)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ShardFormatError(
+            f"{where}: attribute {key!r}: expected JSON, found {text[:40]!r} ({exc})"
+        ) from exc
+
+
+class ShardReader:
+    """Read samples of one shard by local index; the HDF5 file is opened on first access.
+
+    The handle belongs to the process that opened it: after a fork, or when the reader is unpickled in
+    a DataLoader worker, the file is reopened there. Pickling never carries the handle.
+
+    Args:
+        path: A ``shard-XXXXX.h5`` file.
+
+    Raises:
+        ShardFormatError: (on first access) the file is not a readable shard, is truncated, or has an
+            unknown major schema version; reading a corrupt sample names the shard, sample and field.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._file: h5py.File | None = None
+        self._pid: int | None = None
+        self._attrs: dict | None = None
+        self._names: list[str] | None = None
+
+    # -- pickling and lifetime -----------------------------------------------------------------------
+
+    def __getstate__(self) -> dict:
+        return {"path": self.path, "_attrs": self._attrs, "_names": self._names}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["path"])
+        self._attrs, self._names = state["_attrs"], state["_names"]
+
+    def __enter__(self) -> ShardReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the handle if this process opened it (reopened on next access)."""
+        f = getattr(self, "_file", None)
+        if f is not None and self._pid == os.getpid():
+            try:
+                f.close()
+            except Exception:  # noqa: BLE001 - closing during interpreter shutdown may fail harmlessly
+                pass
+        self._file = None
+
+    def _where(self, i: int | None = None, name: str | None = None) -> str:
+        where = f"{self.path}"
+        if i is not None:
+            where += f": sample {i}"
+            if name is not None:
+                where += f" (group {SAMPLES_GROUP}/{name})"
+        return where
+
+    @property
+    def file(self) -> h5py.File:
+        """The open h5py handle of this process."""
+        if self._file is None or self._pid != os.getpid():
+            self._open()
+        return self._file
+
+    def _open(self) -> None:
+        try:
+            f = h5py.File(self.path, "r")
+        except FileNotFoundError:
+            raise
+        except OSError as exc:
+            raise ShardFormatError(f"{self.path}: cannot open shard ({_short(exc)})") from exc
+        try:
+            check_schema_version(f.attrs.get("schema_version"), source=str(self.path))
+            if SAMPLES_GROUP not in f:
+                raise ShardFormatError(f"{self.path}: group {SAMPLES_GROUP!r} is missing")
+            if self._names is None:
+                names = sorted(f[SAMPLES_GROUP].keys())
+                n = int(f.attrs.get("n_samples", -1))
+                if n != len(names):
+                    raise ShardFormatError(
+                        f"{self.path}: attribute n_samples: expected {len(names)} (groups present), found {n}"
+                    )
+                self._names = names
+        except ShardFormatError:
+            f.close()
+            raise
+        except (OSError, KeyError, ValueError) as exc:
+            f.close()
+            raise ShardFormatError(f"{self.path}: unreadable shard metadata ({_short(exc)})") from exc
+        self._file, self._pid = f, os.getpid()
+
+    # -- metadata ------------------------------------------------------------------------------------
+
+    @property
+    def attrs(self) -> dict:
+        """Root attributes as plain Python values (JSON attributes decoded)."""
+        if self._attrs is None:
+            raw = self.file.attrs
+            out = {}
+            for key in raw:
+                value = raw[key]
+                value = value.decode() if isinstance(value, bytes) else value
+                if key in ("variants", "stats", "recipe", "skeleton") and isinstance(value, str):
+                    value = _attr_json(raw, key, str(self.path)) if value else None
+                elif isinstance(value, np.generic):
+                    value = value.item()
+                out[key] = value
+            self._attrs = out
+        return self._attrs
+
+    def __len__(self) -> int:
+        if self._names is None:
+            self.file  # noqa: B018 - opening reads the sample list
+        return len(self._names)
+
+    def variants(self, i: int) -> tuple[str, ...]:
+        """Variant names stored for local sample ``i``, ``"orig"`` first."""
+        g = self._group(i)
+        names = set(g[VARIANTS_GROUP].keys()) if VARIANTS_GROUP in g else set()
+        order = [v for v in (self.attrs.get("variants") or ()) if v in names]
+        return ("orig", *order, *sorted(names - set(order)))
+
+    def sample_index(self, i: int) -> int:
+        """Split-level index of local sample ``i``."""
+        return int(self._name(i))
+
+    # -- samples -------------------------------------------------------------------------------------
+
+    def _name(self, i: int) -> str:
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(f"{self.path}: sample index {i} out of range for {n} samples")
+        return self._names[i]
+
+    def _group(self, i: int) -> h5py.Group:
+        name = self._name(i)
+        try:
+            return self.file[SAMPLES_GROUP][name]
+        except (KeyError, OSError, RuntimeError) as exc:
+            raise ShardFormatError(f"{self._where(i, name)}: unreadable group ({_short(exc)})") from exc
+
+    def read_sample(self, i: int, variant: str = "orig") -> CaptureSample:
+        """Read local sample ``i`` (or one of its variants) with every array in memory.
+
+        Args:
+            i: Local index in ``[0, len(self))`` (negative counts from the end).
+            variant: ``"orig"`` or a name from :meth:`variants`.
+
+        Returns:
+            The CaptureSample, arrays with the in-memory dtypes documented on CaptureSample. A variant
+            has the original's timing and ground truth, ``points3d = variant_from_orig . points3d``.
+
+        Raises:
+            KeyError: Unknown variant (the message lists the stored ones).
+            ShardFormatError: A corrupt group, dataset or attribute, naming shard, sample and field.
+        """
+        name = self._name(i)
+        where = self._where(i, name)
+        g = self._group(i)
+        arrays = {spec.name: self._read(g, spec.name, where) for spec in SAMPLE_FIELDS}
+        try:
+            skeleton = Skeleton.from_dict(_attr_json(g.attrs, "skeleton", where), source=where)
+        except MotionFormatError as exc:
+            raise ShardFormatError(str(exc)) from exc
+        meta = _attr_json(g.attrs, "meta", where)
+        if variant != "orig":
+            vg = g[VARIANTS_GROUP] if VARIANTS_GROUP in g else {}
+            if variant not in vg:
+                raise KeyError(f"{where}: no variant {variant!r}; stored: {', '.join(self.variants(i))}")
+            vg = vg[variant]
+            vwhere = f"{where} variant {variant!r}"
+            var = {spec.name: self._read(vg, spec.name, vwhere) for spec in VARIANT_FIELDS}
+            T = var.pop("variant_from_orig")
+            arrays.update(var)
+            arrays["points3d"] = arrays["points3d"] @ T[:3, :3].T + T[:3, 3]
+            meta = _attr_json(vg.attrs, "meta", vwhere)
+        try:
+            return CaptureSample(
+                name=_attr_str(g.attrs, "name", where),
+                motion_name=_attr_str(g.attrs, "motion_name", where),
+                skeleton=skeleton,
+                variant=variant,
+                meta=meta,
+                **arrays,
+            )
+        except ValueError as exc:
+            raise ShardFormatError(f"{where}: inconsistent arrays ({exc})") from exc
+
+    def _read(self, g: h5py.Group, key: str, where: str) -> np.ndarray:
+        # The low-level calls skip h5py's per-object Python overhead: opening 13 datasets through
+        # ``g[key][()]`` costs about twice the decoding itself (see docs/FORMAT.md, "Read speed").
+        try:
+            ds = h5d.open(g.id, key.encode())
+            data = np.empty(ds.shape, dtype=ds.dtype)
+            if data.size:
+                ds.read(h5s.ALL, h5s.ALL, data)
+        except KeyError as exc:
+            raise ShardFormatError(f"{where}: field {key!r} is missing") from exc
+        except (OSError, RuntimeError, ValueError, TypeError) as exc:
+            raise ShardFormatError(
+                f"{where}: field {key!r}: unreadable data, checksum or filter failed ({_short(exc)})"
+            ) from exc
+        want = np.dtype(_MEMORY_DTYPES[key])
+        if data.dtype != want:
+            if data.dtype.kind != want.kind:
+                raise ShardFormatError(f"{where}: field {key!r}: expected dtype {want}, found {data.dtype}")
+            data = data.astype(want)
+        return data
+
+    def check(self) -> None:
+        """Read every sample and variant, so every Fletcher-32 chunk checksum is verified.
+
+        Raises:
+            ShardFormatError: The first corrupt sample, naming shard, sample and field.
+        """
+        for i in range(len(self)):
+            for v in self.variants(i):
+                self.read_sample(i, v)
+
+
+def _short(exc: BaseException) -> str:
+    """The first line of an h5py error (they can be long)."""
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
