@@ -28,8 +28,8 @@ class PseudoTriangulation:
             shape ``(N, N)``; NaN where no joint is valid.
         valid: Whether joint p is valid for the pair (visible in both, different cameras, non-parallel
             rays, both depths positive), shape ``(N, N, J)`` bool.
-        order: Ranked neighbours of each image: argsort of its cost row after demotion (see
-            ``min_angle_deg``), shape ``(N, N)`` int64; images with infinite cost come last.
+        order: Ranked neighbours of each image: stable argsort of its cost row, shape ``(N, N)`` int64;
+            images with infinite cost come last (the near-parallel demotion applies to X_init only).
         X_init: Initial structure in world, metres, shape ``(N, J, 3)``; every visible joint lies on
             its observed ray (see :func:`pseudo_triangulate` for how the others are filled).
         source: Image whose ray triangulated each joint, shape ``(N, J)`` int64; ``-1`` where the
@@ -156,7 +156,7 @@ def pseudo_triangulate(
     visible: np.ndarray,
     cam_id: np.ndarray,
     *,
-    min_angle_deg: float = 0.0,
+    min_angle_deg: float = 30.0,
     block_rows: int = 64,
 ) -> PseudoTriangulation:
     """Exhaustive pairwise pseudo-triangulation of N images (REFERENCE.md, "Pseudo-triangulation").
@@ -167,12 +167,16 @@ def pseudo_triangulate(
     rays are not parallel; an invalid joint is skipped for that pair only. The pair cost is the mean
     error over valid joints (+inf if none); same-camera pairs are +inf.
 
-    Neighbour order: each cost row is argsorted. With ``min_angle_deg > 0`` a neighbour whose mean ray
-    convergence exceeds ``cos(min_angle_deg)`` (short baseline, unreliable depth) is *demoted*: it keeps
-    its relative rank but comes after every non-demoted finite-cost neighbour. ``cost`` is not changed.
+    Neighbour order: each cost row is argsorted (``order``). For X_init, a neighbour whose mean ray
+    convergence satisfies ``|cos| > cos(min_angle_deg)`` (near-parallel or near-opposite rays: a small
+    triangulation angle and an unreliable depth) is *demoted*: it keeps its relative rank but comes after
+    every non-demoted finite-cost neighbour. Measured on the synthetic ring captures (4 and 8 cameras,
+    10 % missing): 30 degrees cuts the X_init error from 16.8 to 11.6 mm at 2 px noise and from 40 to
+    30 mm at 5 px, and changes nothing noise-free; demoting in ``order`` too would widen the neighbours'
+    temporal spread (median 7 -> 9 images), so ``order`` and ``cost`` are not demoted.
 
-    X_init: a visible joint p of image i sits at ``C_i + s r_i`` where j is the best-ranked image in
-    ``order[i]`` for which p is valid, so it lies on its own ray. Joints that are missing in image i,
+    X_init: a visible joint p of image i sits at ``C_i + s r_i`` where j is the best-ranked image (in
+    the demoted ranking) for which p is valid, so it lies on its own ray. Joints that are missing in image i,
     or visible but valid for no pair, are filled with the estimate of p in the best-ranked neighbour
     that has one; a visible joint filled this way is then projected onto its own ray (depth clipped to
     be positive). If no ranked neighbour has p: the mean of p over all images, else the image's
@@ -183,7 +187,8 @@ def pseudo_triangulate(
         rays: Unit viewing rays in world, shape ``(N, J, 3)`` (anything where not visible).
         visible: Observed-joint mask, shape ``(N, J)`` bool.
         cam_id: Camera of each image, shape ``(N,)`` int.
-        min_angle_deg: Demote neighbours whose mean ray angle is below this, degrees (0 = off).
+        min_angle_deg: For X_init, demote neighbours whose mean ray angle is within this many degrees of
+            parallel or opposite (0 = off).
         block_rows: Rows of the cost matrix computed at once (memory ~ 60 * block_rows * N * J bytes).
 
     Returns:
@@ -240,10 +245,13 @@ def pseudo_triangulate(
         )
     demoted = np.zeros((n, n), dtype=bool)
     if min_angle_deg > 0:
-        demoted = np.nan_to_num(conv, nan=0.0) > np.cos(np.deg2rad(min_angle_deg))
+        demoted = np.abs(np.nan_to_num(conv, nan=0.0)) > np.cos(np.deg2rad(min_angle_deg))
     finite = np.isfinite(cost)
-    order = np.lexsort((cost, demoted, ~finite), axis=-1).astype(np.int64)
-    X, source = _initial_structure(C, r, vis, valid, order, finite)
+    order = np.lexsort((cost, ~finite), axis=-1).astype(np.int64)
+    init_order = (
+        np.lexsort((cost, demoted, ~finite), axis=-1).astype(np.int64) if min_angle_deg > 0 else order
+    )
+    X, source = _initial_structure(C, r, vis, valid, init_order, finite)
     return PseudoTriangulation(cost=cost, convergence=conv, valid=valid, order=order, X_init=X, source=source)
 
 
