@@ -53,14 +53,20 @@ def _normal_equations(theta: np.ndarray, P: np.ndarray, centers: np.ndarray) -> 
     """Per joint ``M (J, 3k, 3k)`` and ``b (J, 3k)`` of ``sum_n ||P_nj (Theta_n beta_j - C_n)||^2``.
 
     Unknowns are ordered basis-major (``beta[k, a]`` at ``3 k + a``), so the system for the first ``k'``
-    basis functions is the leading ``3 k'`` block.
+    basis functions is the leading ``3 k'`` block. Each ``(a, b)`` block is ``Theta^T diag(P[:, j, a, b])
+    Theta``, one batched matrix product (BLAS) per block.
     """
     k = theta.shape[1]
     J = P.shape[1]
-    M = np.einsum("nk,nl,njab->jkalb", theta, theta, P, optimize=True).reshape(J, 3 * k, 3 * k)
+    M = np.empty((J, k, 3, k, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            blk = np.matmul((theta[None, :, :] * P[:, :, a, b].T[:, :, None]).transpose(0, 2, 1), theta)
+            M[:, :, a, :, b] = blk
+            M[:, :, b, :, a] = blk
     PC = np.einsum("njab,nb->nja", P, centers)
     b = np.einsum("nk,nja->jka", theta, PC, optimize=True).reshape(J, 3 * k)
-    return M, b
+    return M.reshape(J, 3 * k, 3 * k), b
 
 
 def _solve(M: np.ndarray, b: np.ndarray, k: int, ridge: float) -> np.ndarray:
@@ -106,28 +112,34 @@ def _cross_validate(
     *,
     n_folds: int,
     ridge: float,
+    patience: int = 2,
 ) -> tuple[int, dict[int, float]]:
-    """Basis size minimising the mean held-out ray distance (K-fold over images)."""
+    """Basis size minimising the mean held-out ray distance (K-fold over images).
+
+    Sizes are tried in increasing order; the search stops once ``patience`` consecutive sizes failed to
+    improve on the best (the held-out error is U-shaped in the basis size: bias, then overfitting).
+    """
     n = timestamp_s.shape[0]
     sizes = [k for k in BASIS_SIZES if 3 * k <= n] or [min(BASIS_SIZES[0], max(n // 3, 1))]
     tpos = np.argsort(np.argsort(timestamp_s, kind="stable"), kind="stable")
     theta = dct_basis(timestamp_s, max(sizes))
     P = ray_projectors(rays, visible)
-    err = {k: 0.0 for k in sizes}
-    count = 0
+    folds = []
     for held in image_folds(n, n_folds):
         test = np.isin(tpos, held)
-        train = ~test
-        M, b = _normal_equations(theta[train], P[train], centers[train])
-        for k in sizes:
-            beta = _solve(M, b, k, ridge)
-            X = np.einsum("nk,jka->nja", theta[test, :k], beta)
-            r = ray_residuals(X, centers[test], rays[test], visible[test])
-            err[k] += float(np.nansum(r))
-        count += int(visible[test].sum())
-    cv = {k: e / max(count, 1) for k, e in err.items()}
-    best = min(cv, key=cv.get)
-    return best, cv
+        folds.append((test, *_normal_equations(theta[~test], P[~test], centers[~test])))
+    count = max(int(visible.sum()), 1)
+    cv: dict[int, float] = {}
+    for k in sizes:
+        err = 0.0
+        for test, M, b in folds:
+            X = np.einsum("nk,jka->nja", theta[test, :k], _solve(M, b, k, ridge))
+            err += float(np.nansum(ray_residuals(X, centers[test], rays[test], visible[test])))
+        cv[k] = err / count
+        best = min(cv, key=cv.get)
+        if sum(1 for q in cv if q > best) >= patience:
+            break
+    return min(cv, key=cv.get), cv
 
 
 @register_method("dct", requires="full", needs="timestamps", summary="DCT trajectory basis (Park et al.)")
@@ -140,7 +152,8 @@ def reconstruct_dct(
     observed joint from its viewing ray, ``sum ||(I - r r^T)(Theta_n beta_p - C_n)||^2``, one linear
     system per joint. The basis size is shared by all joints and chosen (unless ``k`` is given) by
     ``n_folds``-fold cross-validation over images: fit on the other folds, score the mean distance of
-    the held-out observations from their rays, keep the size with the lowest score (Park et al. 2015
+    the held-out observations from their rays, keep the size with the lowest score (sizes from
+    :data:`BASIS_SIZES`, increasing, until two in a row do not improve) (Park et al. 2015
     choose the size by cross-validation to avoid low-reconstructability bases).
 
     Args:
