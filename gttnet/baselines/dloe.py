@@ -202,6 +202,12 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
     """
     from gttnet.solvers.xstep import solve_structure  # the X-step is torch-based; imported on use
 
+    unknown = sorted(set(overrides) - set(DLOEParams.__dataclass_fields__))
+    if unknown:
+        raise ValueError(
+            f"method 'dloe' has no option {unknown[0]!r}; options: xstep_method, "
+            + ", ".join(DLOEParams.__dataclass_fields__)
+        )
     params = DLOEParams(**overrides)
     n = obs.n_images
     centers, rays, vis = obs.centers(), obs.rays(), obs.visible

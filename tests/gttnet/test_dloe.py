@@ -124,5 +124,5 @@ def test_dloe_options(noisy_scene):
     obs, _ = make_view(noisy_scene, "partial")
     rec = reconstruct(obs, "dloe", max_iter=1)
     assert rec.info["iterations"] == 1
-    with pytest.raises(TypeError):
+    with pytest.raises(ValueError, match="has no option 'lambda9'"):
         reconstruct(obs, "dloe", lambda9=1.0)
