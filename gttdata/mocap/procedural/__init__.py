@@ -47,6 +47,9 @@ PROCEDURAL_KINDS: tuple[str, ...] = (
     "mixed",
 )
 
+# Margin synthesized before and after the returned frames, seconds.
+_PAD_S = 0.5
+
 _Generator = Callable[..., tuple[Track, dict]]
 _GENERATORS: dict[str, _Generator] = {
     "walk": gait_track,
@@ -128,8 +131,13 @@ def generate_motion(
     n_frames = int(round(duration_s * fps_hz)) + 1
     body = sample_body(rng, body_scale=body_scale)
     heading0 = float(rng.uniform(-np.pi, np.pi))
-    track, params = _build_track(rng, kind, n_frames, float(fps_hz), body, speed_scale)
+    # Synthesize a margin on both sides and crop it: one-sided differences, smoothing windows and
+    # flight phases cut by the ends then never reach the returned frames.
+    pad = int(round(_PAD_S * fps_hz))
+    track, params = _build_track(rng, kind, n_frames + 2 * pad, float(fps_hz), body, speed_scale)
     positions, _ = place_on_ground(track, body, initial_heading=heading0)
+    positions = positions[pad : pad + n_frames]
+    positions[..., :2] -= positions[:, 0, :2].mean(axis=0)
     provenance = {
         "source": "procedural",
         "kind": kind,
@@ -140,6 +148,9 @@ def generate_motion(
         "body_scale": body_scale,
         "stature_m": round(body.stature_m, 4),
         "initial_heading_rad": round(heading0, 4),
+        "mean_root_speed_mps": round(
+            float(np.linalg.norm(np.diff(positions[:, 0, :2], axis=0), axis=-1).mean() * fps_hz), 4
+        ),
         **params,
     }
     _log.debug("generated procedural %s seed=%d: %d frames", kind, seed, n_frames)

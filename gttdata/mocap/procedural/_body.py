@@ -171,17 +171,26 @@ def forward_kinematics(angles: np.ndarray, offsets: np.ndarray, parents: tuple[i
     t, j, _ = angles.shape
     swing = angles.reshape(-1, 3).copy()
     swing[:, 2] = 0.0
-    rs = Rotation.from_rotvec(swing).as_matrix()
-    c, s = np.cos(angles[..., 2]).reshape(-1), np.sin(angles[..., 2]).reshape(-1)
-    rz = np.zeros_like(rs)
-    rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0
-    local = np.matmul(rs, rz).reshape(t, j, 3, 3)
-    glob = np.empty_like(local)
-    pos = np.zeros((t, j, 3))
+    # Structure-of-arrays layout (..., T): numpy multiplies stacks of 3x3 matrices slowly, while
+    # elementwise products over long frame vectors are fast.
+    rs = Rotation.from_rotvec(swing).as_matrix().reshape(t, j, 3, 3).transpose(1, 2, 3, 0)  # (J, 3, 3, T)
+    c, s = np.cos(angles[..., 2]).T[:, None], np.sin(angles[..., 2]).T[:, None]  # (J, 1, T)
+    local = np.stack(
+        [c * rs[:, :, 0] + s * rs[:, :, 1], c * rs[:, :, 1] - s * rs[:, :, 0], rs[:, :, 2]], axis=2
+    )
+    has_child = set(parents)
+    glob: list[np.ndarray | None] = [None] * j
+    pos = np.zeros((j, 3, t))
     for i, p in enumerate(parents):
         if p < 0:
-            glob[:, i] = local[:, i]
+            glob[i] = local[i]
             continue
-        pos[:, i] = pos[:, p] + glob[:, p] @ offsets[i]
-        glob[:, i] = glob[:, p] @ local[:, i]
-    return pos
+        g = glob[p]
+        off = offsets[i]
+        pos[i] = pos[p] + g[:, 0] * off[0] + g[:, 1] * off[1] + g[:, 2] * off[2]
+        if i in has_child:
+            m = local[i]
+            glob[i] = np.stack(
+                [g[:, 0] * m[0, k] + g[:, 1] * m[1, k] + g[:, 2] * m[2, k] for k in range(3)], axis=1
+            )
+    return np.ascontiguousarray(pos.transpose(2, 0, 1))

@@ -6,16 +6,18 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from gttdata.mocap.procedural._body import JOINT, Body
+from gttdata.mocap.procedural._ground import GAIT_AVERAGING_S
+from gttdata.mocap.procedural._plant import plant_stance_feet
 from gttdata.mocap.procedural._track import Track, smooth_noise, smootherstep
 
 __all__ = ["GAIT_SPEEDS_MPS", "gait_track"]
 
 #: Nominal speed range of each locomotion kind, m/s.
 GAIT_SPEEDS_MPS: dict[str, tuple[float, float]] = {
-    "walk": (0.85, 1.45),
-    "turn": (0.7, 1.4),
-    "jog": (2.0, 2.9),
-    "run": (3.0, 4.2),
+    "walk": (0.8, 1.3),
+    "turn": (0.7, 1.25),
+    "jog": (1.9, 2.7),
+    "run": (2.8, 3.5),
 }
 
 
@@ -181,12 +183,12 @@ def gait_track(
         speed = np.full_like(speed, rng.uniform(0.15, 0.35))
     leg = body.leg_length_m
     s_left = _phase(rng, track, speed, mode, leg)
-    # Range of motion that gives the target stride at this cadence (calibrated on the reference body).
-    ref = 1.35 if mode == "walk" else 3.3
+    # Range of motion that gives the target stride at this cadence (calibrated so that the mean root
+    # speed matches the target within ~10 %).
     amp = (
-        np.clip(speed / ref * 0.91 / leg, 0.25, 1.1)
+        np.clip(speed / 1.12 * 0.91 / leg, 0.25, 1.2)
         if mode == "walk"
-        else np.clip(0.55 + 0.45 * speed / ref, 0.6, 1.3)
+        else np.clip((0.7 + 0.58 * speed / 3.3) * (0.83 if kind == "jog" else 1.0), 0.75, 1.6)
     )
     style = _style(rng, mode)
     _legs(track, s_left, mode, amp, style)
@@ -214,4 +216,5 @@ def gait_track(
     if mode == "run":
         in_stance = ((s_left % 1.0) < stance) | (((s_left + 0.5) % 1.0) < stance)
         track.support = in_stance.astype(np.float64)
+    plant_stance_feet(track, body, smoothing_s=GAIT_AVERAGING_S)
     return track, {"speed_mps": float(speed0), "in_place": in_place}

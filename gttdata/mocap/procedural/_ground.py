@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from gttdata.mocap.procedural._body import FOOT_JOINTS, Body, forward_kinematics
-from gttdata.mocap.procedural._track import Track
+from gttdata.mocap.procedural._track import Track, hann_smooth
 
-__all__ = ["place_on_ground"]
+__all__ = ["GAIT_AVERAGING_S", "place_on_ground"]
 
 _G_MPS2 = 9.81
 # Softness of the lowest-foot choice, metres: keeps the root height smooth when support moves from
@@ -15,8 +15,8 @@ _G_MPS2 = 9.81
 _CONTACT_SOFTNESS_M = 0.006
 # Half-width of the window over which the root blends between stance and flight, seconds.
 _FLIGHT_BLEND_S = 0.04
-# Window over which the root speed of gaits is averaged, seconds.
-_GAIT_AVERAGING_S = 1.1
+#: Window over which the root speed of gaits is averaged, seconds.
+GAIT_AVERAGING_S = 1.1
 
 
 def _softmin(h: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
@@ -25,16 +25,6 @@ def _softmin(h: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
     e = np.exp(-(h - m) / tau)
     s = e.sum(axis=-1, keepdims=True)
     return (m - tau * np.log(s))[..., 0], e / s
-
-
-def _hann_smooth(x: np.ndarray, half: int) -> np.ndarray:
-    """Hann-window moving average along axis 0 with edge padding, same shape as ``x``."""
-    if half < 1:
-        return x
-    win = np.hanning(2 * half + 3)[1:-1]
-    win /= win.sum()
-    pad = np.pad(x, ((half, half),) + ((0, 0),) * (x.ndim - 1), mode="edge")
-    return np.stack([np.convolve(pad[:, k], win, mode="valid") for k in range(x.shape[1])], axis=1)
 
 
 def _flight_gaps(support: np.ndarray) -> list[tuple[int, int]]:
@@ -50,7 +40,7 @@ def _stance_weight(support: np.ndarray, gaps: list[tuple[int, int]], half: int) 
     mask = np.ones(support.size)
     for a, b in gaps:
         mask[a:b] = 0.0
-    return _hann_smooth(mask[:, None], half)[:, 0]
+    return hann_smooth(mask[:, None], half)[:, 0]
 
 
 def _bridge(y: np.ndarray, gaps: list[tuple[int, int]], half: int, dt: float, gravity: float) -> np.ndarray:
@@ -88,7 +78,7 @@ def place_on_ground(track: Track, body: Body, *, initial_heading: float) -> tupl
 
     Returns:
         ``(positions, heading)``: world positions, metres, shape ``(T, J, 3)`` (z up, floor at 0,
-        root path centred on the origin in xy); heading per frame, radians, shape ``(T,)``.
+        root starting at the origin in xy); heading per frame, radians, shape ``(T,)``.
     """
     dt = 1.0 / track.fps_hz
     local = forward_kinematics(track.local_channels(), body.offsets, body.skeleton.parents)
@@ -119,14 +109,13 @@ def place_on_ground(track: Track, body: Body, *, initial_heading: float) -> tupl
     v_lock = -np.einsum("tf,tfc->tc", w_feet, foot_vel + spin)
     # Hand-tuned gait cycles do not keep the stance foot's speed exactly constant; averaging over
     # about two steps trades some centimetres of foot slip for a realistic, steady pelvis speed.
-    half_avg = int(round(_GAIT_AVERAGING_S * track.fps_hz / 2))
-    v_lock += track.contact_mix[:, None] * (_hann_smooth(v_lock, half_avg) - v_lock)
+    half_avg = int(round(GAIT_AVERAGING_S * track.fps_hz / 2))
+    v_lock += track.contact_mix[:, None] * (hann_smooth(v_lock, half_avg) - v_lock)
     v_air = _bridge(v_lock, gaps, half, dt, 0.0) + track.flight_vel
     v_body = w[:, None] * v_lock + (1.0 - w[:, None]) * v_air
     c, s = np.cos(heading), np.sin(heading)
     v_world = np.stack([c * v_body[:, 0] - s * v_body[:, 1], s * v_body[:, 0] + c * v_body[:, 1]], axis=-1)
     xy = np.concatenate((np.zeros((1, 2)), np.cumsum(0.5 * (v_world[1:] + v_world[:-1]), axis=0) * dt))
-    xy -= xy.mean(axis=0)
 
     world = np.empty_like(local)
     world[..., 0] = c[:, None] * local[..., 0] - s[:, None] * local[..., 1] + xy[:, None, 0]

@@ -9,7 +9,7 @@ from scipy.interpolate import PchipInterpolator
 
 from gttdata.mocap.procedural._body import JOINT, SIGNS
 
-__all__ = ["Track", "keyframes", "segment_weights", "smooth_noise", "smootherstep"]
+__all__ = ["Track", "hann_smooth", "keyframes", "segment_weights", "smooth_noise", "smootherstep"]
 
 
 @dataclass
@@ -126,3 +126,21 @@ def segment_weights(t: np.ndarray, bounds: list[float], fade_s: float) -> np.nda
     up = [np.ones_like(t), *ramps]
     down = [*(1.0 - r for r in ramps), np.ones_like(t)]
     return np.stack([a * b for a, b in zip(up, down, strict=True)], axis=1)
+
+
+def hann_smooth(x: np.ndarray, half: int) -> np.ndarray:
+    """Hann-window moving average along axis 0 (edges padded with the end values).
+
+    Args:
+        x: Signal, shape ``(T, C)``.
+        half: Half-width of the window in samples; ``< 1`` returns ``x`` unchanged.
+
+    Returns:
+        Smoothed signal, shape ``(T, C)``.
+    """
+    if half < 1:
+        return x
+    win = np.hanning(2 * half + 3)[1:-1]
+    win /= win.sum()
+    pad = np.pad(x, ((half, half), (0, 0)), mode="edge")
+    return np.stack([np.convolve(pad[:, k], win, mode="valid") for k in range(x.shape[1])], axis=1)
