@@ -67,8 +67,8 @@ def noise_aware_lambda2(sigma_px: float, f_px: float, depth_m: float, *, prior_s
     <= 0.03 at 5 px, which the default ``prior_std_m = 2 mm`` tracks (0.44, 0.11, 0.05, 0.018). The
     true ``L_out x`` residual there is only 0.4 mm rms: the effective spread is larger because
     neighbouring images' noise is correlated through the solve. MPJPE pinned -> noise-aware:
-    4.6 -> 2.6 mm (1 px), 9.1 -> 4.2 mm (2 px), 13.6 -> 5.7 mm (3 px), 22.7 -> 9.2 mm (5 px). Recalibrate on real motion
-    (faster than the synthetic body) before relying on the constant.
+    4.6 -> 2.6 mm (1 px), 9.1 -> 4.2 mm (2 px), 13.6 -> 5.7 mm (3 px), 22.7 -> 9.2 mm (5 px).
+    Recalibrate on real motion (faster than the synthetic body) before relying on the constant.
     For affinities whose rows are not O(1) (e.g. soft-max weights), scale ``prior_std_m`` by the row sum.
 
     Args:
