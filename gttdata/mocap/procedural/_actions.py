@@ -8,7 +8,7 @@ from gttdata.mocap.procedural._body import Body
 from gttdata.mocap.procedural._jump import jump_track
 from gttdata.mocap.procedural._track import Track, smooth_noise, smootherstep
 
-__all__ = ["action_track", "stand_base"]
+__all__ = ["action_track", "stand_base", "twist_pelvis"]
 
 # Arm targets per gesture, anatomical degrees: (shoulder abduction, shoulder flexion, shoulder
 # internal rotation, elbow flexion, wrist flexion), each a (low, high) range; plus the head turn
@@ -43,6 +43,20 @@ def _smooth_abs(x: np.ndarray) -> np.ndarray:
     return np.sqrt(x * x + 0.04)
 
 
+def twist_pelvis(track: Track, phi: np.ndarray) -> None:
+    """Twist the pelvis by ``phi`` degrees (to the left) with both feet staying where they are.
+
+    The thighs counter-rotate about their axes so the feet keep pointing forward, and each leg
+    tilts forward or back by the angle that cancels its hip joint's fore-aft displacement (the
+    hips sit ~0.1 m either side of the root, ~0.85 m above the ankles); the ankles keep the feet flat.
+    """
+    track.add("root", 2, phi)
+    track.add_sides("femur", 2, phi, -phi)
+    tilt = np.rad2deg(np.arcsin(0.11 * np.sin(np.deg2rad(phi))))
+    track.add_sides("femur", 1, tilt, -tilt)
+    track.add_sides("foot", 1, -tilt, tilt)
+
+
 def stand_base(rng: np.random.Generator, track: Track, *, calm: float = 1.0) -> None:
     """Add a relaxed standing posture with weight shifts, breathing, head movement and arm drift.
 
@@ -74,6 +88,7 @@ def stand_base(rng: np.random.Generator, track: Track, *, calm: float = 1.0) -> 
     track.add("thorax", 1, breath + calm * n[:, 3])
     track.add("lowerback", 0, calm * 2.0 * n[:, 4] - 0.3 * shift)
     track.add("thorax", 2, calm * 4.0 * n[:, 5])
+    twist_pelvis(track, calm * 6.0 * smooth_noise(rng, t, 1, max_hz=0.15)[:, 0])
     track.add("upperneck", 2, calm * 20.0 * n[:, 6])
     track.add("upperneck", 1, calm * 8.0 * n[:, 7])
     track.add("head", 0, calm * 5.0 * n[:, 8])
@@ -164,7 +179,6 @@ def action_track(
     track = Track.zeros(n_frames, fps_hz)
     calm = 1.0 if kind == "idle" else 0.6
     stand_base(rng, track, calm=calm)
-    track.yaw_rate = np.deg2rad(3.0) * smooth_noise(rng, track.times_s, 1, max_hz=0.1)[:, 0]
     if kind == "idle":
         names = (
             _gesture_sequence(rng, track, _IDLE_KINDS, tempo=0.7 * tempo, pace=2.0)

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gttdata.mocap.procedural._actions import stand_base
+from gttdata.mocap.procedural._actions import stand_base, twist_pelvis
 from gttdata.mocap.procedural._body import Body
 from gttdata.mocap.procedural._track import Track, segment_weights
 
@@ -56,11 +56,9 @@ def _pattern_step_touch(track: Track, u: np.ndarray, rng: np.random.Generator) -
 
 def _pattern_twist(track: Track, u: np.ndarray, rng: np.random.Generator) -> None:
     phi = rng.uniform(15.0, 30.0) * np.sin(u)
-    track.add("root", 2, phi)
+    twist_pelvis(track, phi)
     for j in ("lowerback", "upperback", "thorax"):
         track.add(j, 2, -phi / 3.0)
-    # Counter-rotate the thighs so the feet keep pointing forward while the pelvis twists.
-    track.add_sides("femur", 2, phi, -phi)
     _bounce(track, 20.0 + 6.0 * np.cos(2.0 * u))
     track.add_sides("humerus", 0, 60.0, 60.0)
     track.add_sides("radius", 1, 90.0, 90.0)
@@ -83,6 +81,11 @@ def _pattern_disco(track: Track, u: np.ndarray, rng: np.random.Generator) -> Non
 
 
 def _pattern_spin(track: Track, u: np.ndarray, rng: np.random.Generator) -> None:
+    # Turning needs steps: lift the feet alternately on the beat (the ground stage pivots the body
+    # about whichever foot is down).
+    s = np.sin(0.5 * u)
+    _tap(track, "l", np.maximum(s, 0.0) ** 2)
+    _tap(track, "r", np.maximum(-s, 0.0) ** 2)
     _bounce(track, 10.0 + 6.0 * 0.5 * (1.0 + np.cos(u)))
     track.add_sides("humerus", 0, 75.0, 75.0)
     track.add_sides("radius", 1, 25.0, 25.0)
@@ -153,6 +156,7 @@ def dance_track(
         track.angles += weights[:, k, None, None] * part.angles
         if name == "spin":
             turns = rng.choice((-1.0, 1.0)) * 2.0 * np.pi / (8.0 * beat_s)
-            track.yaw_rate += weights[:, k] * turns
+            # Turn only while one foot is lifted (sin^2 of the step phase, mean 1/2), not in double support.
+            track.yaw_rate += weights[:, k] * turns * 2.0 * np.sin(0.5 * u) ** 2
     stand_base(rng, track, calm=0.3)
     return track, {"bpm": float(bpm), "patterns": seq}
