@@ -139,6 +139,13 @@ class Manifest:
             ) from exc
         kw = {k: d[k] for k in names}
         kw["variants"] = tuple(kw["variants"])
+        # JSON is written with sorted keys: restore the recipe's split order.
+        order = [s.get("name") for s in (kw["recipe"] or {}).get("splits", ())]
+        splits = kw["splits"]
+        kw["splits"] = {
+            k: splits[k]
+            for k in sorted(splits, key=lambda k: (order.index(k) if k in order else len(order), k))
+        }
         return cls(**kw, shards=shards)
 
     def split_names(self) -> tuple[str, ...]:

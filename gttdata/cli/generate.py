@@ -1,0 +1,121 @@
+"""The ``gttdata generate`` command: recipe in, shards and manifest out, with a summary table."""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import time
+from pathlib import Path
+
+import click
+
+from gttdata.cli import friendly_errors
+from gttdata.cli.inspect import format_summary
+from gttdata.cli.verify import repo_manifests_dir
+from gttdata.generation import generate_dataset, parse_shard_range, plan_blocks
+from gttdata.manifest import Manifest, register_manifest
+from gttdata.recipe import load_recipe
+from gttdata.shards.collection import DatasetReader
+
+__all__ = ["generate_cmd", "register"]
+
+
+def _preview(manifest: Manifest, root: Path, n: int) -> None:
+    """Render the first ``n`` samples of the first split with gttdata.preview.render, when installed."""
+    try:
+        from gttdata.preview.render import render_samples
+    except ImportError as exc:
+        click.echo(f"--preview: skipped, the preview renderer is not available ({exc})")
+        return
+    split = next(iter(manifest.splits))
+    reader = DatasetReader(root, split, manifest=manifest)
+    samples = [reader.read_sample(i) for i in range(min(n, len(reader)))]
+    out = root / "preview"
+    try:
+        inspect.signature(render_samples).bind(samples, out)
+    except TypeError:
+        click.echo(
+            f"--preview: skipped, render_samples{inspect.signature(render_samples)} does not take (samples, out_dir)"
+        )
+        return
+    result = render_samples(samples, out)
+    click.echo(f"previews of {len(samples)} {split} samples in {out}" + (f": {result}" if result else ""))
+
+
+@click.command("generate")
+@click.argument("recipe_path", metavar="RECIPE", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("overrides", nargs=-1, metavar="[KEY=VALUE]...")
+@click.option("--workers", "-j", type=click.IntRange(min=1), default=1, show_default=True, help="Processes.")
+@click.option("--shard-range", default=None, metavar="A:B", help="Write only blocks A..B-1 (array jobs).")
+@click.option("--resume", is_flag=True, help="Keep shards that verify, regenerate the rest.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Output directory (overrides output_dir).",
+)
+@click.option(
+    "--register",
+    "register_",
+    is_flag=True,
+    help="Copy the manifest to the repository's manifests/<name>.json.",
+)
+@click.option(
+    "--preview", type=click.IntRange(min=0), default=0, metavar="N", help="Render N samples afterwards."
+)
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@friendly_errors
+def generate_cmd(
+    recipe_path: Path,
+    overrides: tuple[str, ...],
+    workers: int,
+    shard_range: str | None,
+    resume: bool,
+    out: Path | None,
+    register_: bool,
+    preview: int,
+    progress: bool,
+) -> None:
+    """Simulate the captures of RECIPE into HDF5 shards, then write and verify manifest.json.
+
+    Example: gttdata generate recipes/gttdata/tiny.yaml seed=3 --workers 2 --out /tmp/tiny
+    """
+    recipe = load_recipe(recipe_path, overrides)
+    if out is not None:
+        recipe = dataclasses.replace(recipe, output_dir=str(out))
+    blocks = plan_blocks(recipe)
+    chosen = parse_shard_range(shard_range, len(blocks))
+    n = sum(blocks[i].n_samples for i in chosen)
+    click.echo(
+        f"{recipe.name}: {n} samples in {len(chosen)} of {len(blocks)} shards -> {recipe.output_dir} "
+        f"({workers} worker{'s' if workers > 1 else ''}{', resume' if resume else ''})"
+    )
+    t0 = time.perf_counter()
+    manifest = generate_dataset(
+        recipe, workers=workers, shard_range=shard_range, resume=resume, progress=progress
+    )
+    seconds = time.perf_counter() - t0
+    if manifest is None:
+        click.echo(
+            f"shards {chosen.start}:{chosen.stop} done in {seconds:.1f} s; other shards are missing, so the manifest "
+            f"is written by the job that completes the dataset (or: gttdata manifest {recipe.output_dir})"
+        )
+        return
+    for line in format_summary(manifest):
+        click.echo(line)
+    total = manifest.statistics
+    click.echo(
+        f"{seconds:.1f} s: {n / seconds:.1f} samples/s, "
+        f"{total.get('n_images', 0) * n / max(manifest.n_samples(), 1) / seconds:.0f} images/s; "
+        f"manifest {Path(recipe.output_dir) / 'manifest.json'} verified"
+    )
+    root = Path(recipe.output_dir)
+    if register_:
+        click.echo(f"registered {register_manifest(manifest, repo_manifests_dir(), location=root)}")
+    if preview:
+        _preview(manifest, root, preview)
+
+
+def register(main: click.Group) -> None:
+    """Attach ``gttdata generate``."""
+    main.add_command(generate_cmd)
