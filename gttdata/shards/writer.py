@@ -266,7 +266,8 @@ class ShardWriter:
             except Exception:  # noqa: BLE001 - the file is deleted anyway; keep the original error
                 _log.debug("closing %s after an error failed", self._tmp)
             self._file = None
-            tmps.append(self._tmp)
+        tmps.append(self._tmp)  # also a closed file whose fsync failed
+        self._tmp = None
         for tmp in tmps:
             if tmp is not None and tmp.exists():
                 tmp.unlink()
@@ -333,6 +334,7 @@ class ShardWriter:
             bytes=tmp.stat().st_size,
         )
         self._pending.append((tmp, info))
+        self._tmp = None
         if self.rename_on_close:
             self.commit()
         if self.parts:
