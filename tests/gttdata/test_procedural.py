@@ -229,12 +229,20 @@ def test_left_is_on_the_subjects_left(kind):
     assert ((hips * left).sum(axis=1) > 0).mean() > 0.99
 
 
-def test_walk_heads_where_it_goes():
-    p = _motion("walk").positions
+@pytest.mark.parametrize("seed", [0, 2])
+def test_walk_heads_where_it_goes(seed):
+    m = _motion("walk", seed)
+    p = m.positions
     v = np.diff(p[::30, 0, :2], axis=0)
     hips = (p[::30, SK.index("lfemur"), :2] - p[::30, SK.index("rfemur"), :2])[:-1]
     left = np.stack([-v[:, 1], v[:, 0]], axis=1)
-    assert ((hips * left).sum(axis=1) > 0).all()
+    facing = -1.0 if m.provenance["variant"] == "backward" else 1.0
+    assert (facing * (hips * left).sum(axis=1) > 0).all()
+
+
+def test_walk_variants_occur():
+    variants = {generate_motion("walk", seed=s, duration_s=0.5).provenance["variant"] for s in range(40)}
+    assert {"normal", "backward", "crouched", "carrying", "uneven"} <= variants
 
 
 def test_random_motion_is_generate_motion_of_a_drawn_kind():

@@ -42,26 +42,46 @@ _RUN = {
     "ankle": _periodic([(0, 4), (15, 20), (38, -24), (55, -6), (80, 8)]),
 }
 _STANCE_FRACTION = {"walk": 0.62, "run": 0.38}
+# Style variants per kind and their odds: walking backwards, crouched (sneaking), carrying something
+# in one hand (that arm does not swing), uneven (one leg takes shorter strides, as when limping).
+_VARIANTS: dict[str, tuple[tuple[str, ...], tuple[float, ...]]] = {
+    "walk": (("normal", "backward", "crouched", "carrying", "uneven"), (0.6, 0.1, 0.1, 0.1, 0.1)),
+    "turn": (("normal", "crouched", "carrying"), (0.8, 0.1, 0.1)),
+    "jog": (("normal", "carrying", "uneven"), (0.8, 0.1, 0.1)),
+    "run": (("normal",), (1.0,)),
+}
 
 
-def _phase(rng: np.random.Generator, track: Track, speed: np.ndarray, mode: str, leg_m: float) -> np.ndarray:
-    """Left-leg gait phase in cycles (unwrapped), from a cadence that grows with speed."""
+def _phase(
+    rng: np.random.Generator, track: Track, speed: np.ndarray, mode: str, leg_m: float, *, backward: bool
+) -> np.ndarray:
+    """Left-leg gait phase in cycles (unwrapped), from a cadence that grows with speed.
+
+    Walking backwards runs the cycle in reverse: the stance foot then sweeps forward under the body.
+    """
     if mode == "walk":
         freq = (0.45 + 0.33 * speed) * np.sqrt(0.91 / leg_m)
     else:
         freq = (1.2 + 0.1 * speed) * np.sqrt(0.91 / leg_m)
-    return rng.uniform(0.0, 1.0) + np.concatenate(([0.0], np.cumsum(freq[:-1]) / track.fps_hz))
+    sign = -1.0 if backward else 1.0
+    return rng.uniform(0.0, 1.0) + sign * np.concatenate(([0.0], np.cumsum(freq[:-1]) / track.fps_hz))
 
 
 def _legs(track: Track, s_left: np.ndarray, mode: str, amp: np.ndarray, style: dict) -> None:
     """Hip, knee and ankle angles of both legs, plus stance-side hip adduction."""
     curves = _WALK if mode == "walk" else _RUN
-    for side, s in (("l", s_left % 1.0), ("r", (s_left + 0.5) % 1.0)):
+    crouch = style["crouch"]
+    for side, s, gain in (
+        ("l", s_left % 1.0, style["leg_gain"][0]),
+        ("r", (s_left + 0.5) % 1.0, style["leg_gain"][1]),
+    ):
         hip, knee, ankle = (curves[k](s) for k in ("hip", "knee", "ankle"))
-        # Scale about the mean flexion so slow gaits use a smaller range of motion.
-        track.add(side + "femur", 1, 10.0 + amp * (hip - 10.0))
-        track.add(side + "tibia", 1, amp * knee + (1.0 - amp) * style["knee_bend"])
-        track.add(side + "foot", 1, amp * ankle)
+        a = amp * gain
+        # Scale about the mean flexion so slow gaits use a smaller range of motion; a crouched gait
+        # adds knee and hip flexion with the ankle keeping the foot's orientation.
+        track.add(side + "femur", 1, 10.0 + a * (hip - 10.0) + 20.0 * crouch)
+        track.add(side + "tibia", 1, a * knee + (1.0 - a) * style["knee_bend"] + 28.0 * crouch)
+        track.add(side + "foot", 1, a * ankle + 8.0 * crouch)
         stance = np.sin(np.pi * np.clip(s / _STANCE_FRACTION[mode], 0.0, 1.0)) ** 2
         track.add(side + "femur", 0, style["hip_abd"] - 4.0 * stance)
         track.add(side + "femur", 2, -style["toe_out"])
@@ -77,7 +97,7 @@ def _upper_body(track: Track, s_left: np.ndarray, mode: str, amp: np.ndarray, st
     track.add("root", 2, -pelvis_yaw * c1)
     for j in ("lowerback", "upperback", "thorax"):
         track.add(j, 2, (pelvis_yaw + thorax_yaw) / 3.0 * c1)
-        track.add(j, 1, style["lean"] / 3.0 + amp * 1.0 * c2)
+        track.add(j, 1, (style["lean"] + 15.0 * style["crouch"]) / 3.0 + amp * 1.0 * c2)
     track.add("root", 0, -amp * 4.0 * np.sin(2.0 * np.pi * s_left))
     track.add("lowerback", 0, amp * 3.0 * np.sin(2.0 * np.pi * s_left))
     track.add("root", 1, style["pelvis_tilt"] + amp * 2.0 * c2)
@@ -86,12 +106,14 @@ def _upper_body(track: Track, s_left: np.ndarray, mode: str, amp: np.ndarray, st
         track.add(j, 1, -style["lean"] / 3.0)
     arm_amp = amp * style["arm_swing"]
     for side, sign in (("l", -1.0), ("r", 1.0)):
-        swing = sign * arm_amp * np.cos(2.0 * np.pi * (s_left - 0.04))
-        track.add(side + "humerus", 1, style["arm_flex"] + swing)
+        carry = side == style["carry"]
+        swing = sign * arm_amp * np.cos(2.0 * np.pi * (s_left - 0.04)) * (0.15 if carry else 1.0)
+        track.add(side + "humerus", 1, style["arm_flex"] + swing + (12.0 if carry else 0.0))
         track.add(side + "humerus", 0, style["arm_abd"] + (4.0 if run else 0.0))
-        track.add(side + "humerus", 2, style["arm_rot"])
+        track.add(side + "humerus", 2, style["arm_rot"] + (20.0 if carry else 0.0))
         # Softplus rather than max(swing, 0): the elbow bends on the forward swing without a kink.
-        track.add(side + "radius", 1, style["elbow"] + 0.25 * (swing + np.sqrt(swing * swing + 25.0)))
+        elbow = style["elbow"] + 0.25 * (swing + np.sqrt(swing * swing + 25.0))
+        track.add(side + "radius", 1, np.full_like(swing, 85.0) if carry else elbow)
         track.add(side + "wrist", 1, 8.0)
 
 
@@ -114,10 +136,16 @@ def _foot_loads(s_left: np.ndarray, mode: str, stance: float) -> np.ndarray:
     return np.stack(loads, axis=1)
 
 
-def _style(rng: np.random.Generator, mode: str) -> dict:
-    """Per-subject gait style: posture, arm carriage, toe-out; degrees."""
+def _style(rng: np.random.Generator, mode: str, variant: str) -> dict:
+    """Per-subject gait style: posture, arm carriage, toe-out (degrees) and the variant's settings."""
     run = mode != "walk"
+    weak = rng.uniform(0.75, 0.9)
     return {
+        "crouch": rng.uniform(0.5, 1.0) if variant == "crouched" else 0.0,
+        "carry": str(rng.choice(("l", "r"))) if variant == "carrying" else "",
+        "leg_gain": ((weak, 1.0) if rng.uniform() < 0.5 else (1.0, weak))
+        if variant == "uneven"
+        else (1.0, 1.0),
         "lean": rng.uniform(4.0, 12.0) if run else rng.uniform(-1.0, 5.0),
         "pelvis_tilt": rng.uniform(0.0, 6.0),
         "hip_abd": rng.uniform(-1.0, 2.0),
@@ -175,6 +203,10 @@ def gait_track(
     lo, hi = GAIT_SPEEDS_MPS[kind]
     speed0 = 0.5 * (lo + hi) * speed_scale if speed_scale is not None else rng.uniform(lo, hi)
     mode = "walk" if kind in ("walk", "turn") else "run"
+    variants, odds = _VARIANTS[kind]
+    variant = str(rng.choice(variants, p=odds))
+    if variant == "backward":
+        speed0 *= 0.6
     track = Track.zeros(n_frames, fps_hz)
     t = track.times_s
     speed = speed0 * (1.0 + 0.08 * smooth_noise(rng, t, 1, max_hz=0.2)[:, 0])
@@ -182,7 +214,7 @@ def gait_track(
     if in_place:
         speed = np.full_like(speed, rng.uniform(0.15, 0.35))
     leg = body.leg_length_m
-    s_left = _phase(rng, track, speed, mode, leg)
+    s_left = _phase(rng, track, speed, mode, leg, backward=variant == "backward")
     # Range of motion that gives the target stride at this cadence (calibrated so that the mean root
     # speed matches the target within ~10 %).
     amp = (
@@ -190,7 +222,7 @@ def gait_track(
         if mode == "walk"
         else np.clip((0.7 + 0.58 * speed / 3.3) * (0.83 if kind == "jog" else 1.0), 0.75, 1.6)
     )
-    style = _style(rng, mode)
+    style = _style(rng, mode, variant)
     _legs(track, s_left, mode, amp, style)
     _upper_body(track, s_left, mode, amp, style)
     # Turning: lean into the curve and look where you go.
@@ -217,4 +249,4 @@ def gait_track(
         in_stance = ((s_left % 1.0) < stance) | (((s_left + 0.5) % 1.0) < stance)
         track.support = in_stance.astype(np.float64)
     plant_stance_feet(track, body, smoothing_s=GAIT_AVERAGING_S)
-    return track, {"speed_mps": float(speed0), "in_place": in_place}
+    return track, {"speed_mps": float(speed0), "in_place": in_place, "variant": variant}
