@@ -29,6 +29,7 @@ class DLOEParams:
 
     Args:
         lambda1: Weight of the compactness terms (embedding distance in the W-step, ``x^T L_sym x``).
+        lambda2: Ray weight of the X-step; None pins observed joints to their rays (the reference's 1e10).
         lambda3: Weight of the ray-convergence penalty (inch^2 units, see module note).
         w_prior: Weight of the within-camera interpolation chain W_const in ``W`` (partial/full only).
         d_const: Weight of the identity in ``D = (1 - d_const) diag(d) + d_const I``.
@@ -36,9 +37,12 @@ class DLOEParams:
         tol: Stop when ``||X_k+1 - X_k||_F / (N P)`` (X in inches) falls below this.
         n_candidates: Candidate neighbours per image in the W-step (best pseudo-triangulation partners).
         qp_iters: Iterations of the batched simplex QP solver per W-step.
+        mask_missing: Fit each W row on the image's observed joints only (the reference drops the
+            missing coordinates of x_n; filled-in joints are estimates, not data).
     """
 
     lambda1: float = 0.0015
+    lambda2: float | None = None
     lambda3: float = 0.03
     w_prior: float = 0.1
     d_const: float = 0.5
@@ -46,6 +50,7 @@ class DLOEParams:
     tol: float = 1e-3
     n_candidates: int = 20
     qp_iters: int = 300
+    mask_missing: bool = False
 
 
 def candidate_neighbours(obs: Observations, cost: np.ndarray, order: np.ndarray, k: int) -> np.ndarray:
@@ -94,6 +99,7 @@ def w_step(
     params: DLOEParams,
     *,
     w0: np.ndarray | None = None,
+    observed: np.ndarray | None = None,
 ) -> np.ndarray:
     """W-step: each row of W_var is a simplex-constrained least-squares fit over its candidates.
 
@@ -116,6 +122,7 @@ def w_step(
         d: Current diagonal of D, shape ``(N,)``.
         params: Parameters.
         w0: Warm start, shape ``(N, K)``.
+        observed: Optional mask ``(N, J)``: only row n's observed joints enter its data term.
 
     Returns:
         Candidate weights, shape ``(N, K)``; rows sum to 1 (0 for rows without candidates).
@@ -129,6 +136,8 @@ def w_step(
     mask = cand >= 0
     cidx = np.where(mask, cand, 0)
     g = a[:, None, :] - c * Y[cidx]  # (N, K, 3P)
+    if observed is not None:
+        g = g * np.repeat(observed, 3, axis=1)[:, None, :]
     v = np.take_along_axis(aconv, cidx, axis=1) * mask
     s = (W_const * aconv).sum(axis=1) if use_prior else np.zeros(n)
     d2 = (d**2)[:, None, None]
@@ -189,7 +198,8 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
     (:func:`w_step`), form ``W = 0.9 W_var + 0.1 W_const`` (within-camera interpolation chain, partial
     and full sequencing only; ``W = W_var`` without sequencing), fit ``d`` (:func:`d_step`) and
     ``D = 0.5 diag(d) + 0.5 I``, then solve the X-step with the affinity ``A = D W`` and pinned rays
-    (:func:`gttnet.solvers.xstep.solve_structure`, lambda1 = 0.0015). Stops after ``max_iter`` rounds or
+    (:func:`gttnet.solvers.xstep.solve_structure`, lambda1 = 0.0015; ``lambda2`` overrides the pinning,
+    e.g. with :func:`gttnet.solvers.xstep.noise_aware_lambda2`). Stops after ``max_iter`` rounds or
     when ``||dX||_F / (N P) < tol`` with X in inches (the reference's units).
 
     Args:
@@ -223,14 +233,32 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
     deltas: list[float] = []
     for _ in range(params.max_iter):
         Xi = X * _INCH_PER_M
-        w = w_step(Xi, cand, pt.convergence, mds_embedding(Xi), W_const, d, params, w0=w)
+        w = w_step(
+            Xi,
+            cand,
+            pt.convergence,
+            mds_embedding(Xi),
+            W_const,
+            d,
+            params,
+            w0=w,
+            observed=vis if params.mask_missing else None,
+        )
         W = _scatter(cand, w, n)
         if use_prior:
             W = (1.0 - params.w_prior) * W + params.w_prior * W_const
         d = d_step(Xi, W, pt.convergence, params)
         A = ((1.0 - params.d_const) * d + params.d_const)[:, None] * W
+        # X_init as a vanishing ridge keeps the solve unique where a joint is unseen in a linked component.
         X_new = solve_structure(
-            torch.from_numpy(A), centers, rays, vis, lambda1=params.lambda1, lambda2=None, method=xstep_method
+            torch.from_numpy(A),
+            centers,
+            rays,
+            vis,
+            lambda1=params.lambda1,
+            lambda2=params.lambda2,
+            method=xstep_method,
+            x_prior=pt.X_init,
         )
         X_new = X_new.detach().cpu().numpy() if isinstance(X_new, torch.Tensor) else np.asarray(X_new)
         deltas.append(float(np.linalg.norm((X_new - X) * _INCH_PER_M) / (n * obs.n_joints)))
