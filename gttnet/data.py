@@ -23,6 +23,7 @@ __all__ = [
     "affinity_targets",
     "prepare_item",
     "open_source",
+    "ConcatSource",
 ]
 
 log = logging.getLogger(__name__)
@@ -116,8 +117,9 @@ class RecipeSource:
     """
 
     def __init__(self, recipe, split: str) -> None:
-        from gttdata.generate_plan import n_samples
+        from gttdata.generate_plan import n_samples, validate_inputs
 
+        validate_inputs(recipe)  # a missing motion file fails here, in one line, not inside a worker
         counts = n_samples(recipe)
         if split not in counts:
             raise ValueError(f"the data recipe has no split {split!r}; splits: {sorted(counts)}")
@@ -171,23 +173,62 @@ class ShardSource:
         return {**self.__dict__, "_sets": {}}
 
 
-def open_source(spec, split: str):
-    """The sample source a :class:`~gttnet.train.recipe.DataSpec` describes, generating shards if needed."""
+class ConcatSource:
+    """Several sources seen as one, index after index.
+
+    Args:
+        sources: ``(source, count)`` pairs; the first ``count`` samples of each are used.
+    """
+
+    def __init__(self, sources: Sequence[tuple[object, int]]) -> None:
+        self.parts = [(src, int(n)) for src, n in sources if n > 0]
+        self._starts = np.cumsum([0] + [n for _, n in self.parts])
+
+    def __len__(self) -> int:
+        return int(self._starts[-1])
+
+    def view(self, index: int, sequencing: str, variant: str) -> tuple[Observations, GroundTruth]:
+        """The view of global sample ``index`` (see :meth:`RecipeSource.view`)."""
+        part = int(np.searchsorted(self._starts, index, side="right") - 1)
+        src, _ = self.parts[part]
+        return src.view(index - int(self._starts[part]), sequencing, variant)
+
+
+def _open_one(spec, split: str):
     from gttdata.recipe import load_recipe
 
-    gen = load_recipe(spec.generate, spec.generate_overrides)
-    if spec.source == "recipe":
+    gen = load_recipe(spec.generate, spec.overrides)
+    if spec.kind == "recipe":
         return RecipeSource(gen, split)
     root = Path(spec.root or gen.output_dir)
     if not any(root.glob("**/*.h5")):
         from gttdata.cli import main as gttdata_main
 
         log.info("no shards under %s: generating them from %s", root, spec.generate)
-        args = ["generate", spec.generate, *[a for o in spec.generate_overrides for a in ("--set", o)]]
+        args = ["generate", spec.generate, *spec.overrides]
         if spec.root:
-            args += ["--out", str(root)]
+            args.append(f"output_dir={root}")
         gttdata_main(args, standalone_mode=False)
     return ShardSource(root, split)
+
+
+def open_source(data_spec, split: str, *, limit: str = "max_train") -> ConcatSource:
+    """The samples of ``split`` over every source of a :class:`~gttnet.train.recipe.DataSpec`.
+
+    Args:
+        data_spec: The recipe's data section.
+        split: Split name.
+        limit: Which per-source cap applies: ``"max_train"`` or ``"max_val"``.
+
+    Returns:
+        A :class:`ConcatSource`.
+    """
+    parts = []
+    for spec in data_spec.sources:
+        src = _open_one(spec, split)
+        cap = getattr(spec, limit)
+        parts.append((src, len(src) if cap is None else min(cap, len(src))))
+    return ConcatSource(parts)
 
 
 class SequenceDataset(torch.utils.data.Dataset):

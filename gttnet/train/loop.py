@@ -125,8 +125,13 @@ def _lr(stage: Stage, state: LoopState, total: int) -> float:
 
 @torch.no_grad()
 def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
+    """Stage loss, MPJPE of X^E and X_init (mean and median over sequences), and top-Q precision.
+
+    ``kept_precision`` is the fraction of kept A^S entries that link true temporal neighbours (binary
+    A^G): a solver-free measure of the learned affinity.
+    """
     model.eval()
-    totals, mpjpe, mpjpe_init = [], [], []
+    totals, mpjpe, mpjpe_init, precision = [], [], [], []
     parts_sum: dict[str, float] = {}
     for item in items:
         out = model([item.inputs], solve=True)
@@ -136,11 +141,17 @@ def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
             parts_sum[k] = parts_sum.get(k, 0.0) + float(v) / len(items)
         mpjpe.append(float((out[0].x_est - item.points3d).norm(dim=-1).mean()) * 1000.0)
         mpjpe_init.append(float((item.inputs.x_init - item.points3d).norm(dim=-1).mean()) * 1000.0)
+        aff = out[0].affinity
+        real = aff.mask.gather(1, aff.keep)
+        precision.append(float(item.target_binary.gather(1, aff.keep)[real].mean()) if real.any() else 0.0)
     model.train()
     return {
         "loss": float(np.mean(totals)),
         "mpjpe_mm": float(np.mean(mpjpe)),
+        "mpjpe_median_mm": float(np.median(mpjpe)),
         "mpjpe_init_mm": float(np.mean(mpjpe_init)),
+        "mpjpe_init_median_mm": float(np.median(mpjpe_init)),
+        "kept_precision": float(np.mean(precision)),
         **{f"loss_{k}": v for k, v in parts_sum.items()},
     }
 
@@ -236,14 +247,13 @@ def _prepare(
     log.info("run %s on %s (world %d): %d parameters", run_dir, dev, world, n_params)
 
     spec = recipe.data
-    train_src = open_source(spec, spec.train_split)
-    n_train = len(train_src) if spec.max_train is None else min(spec.max_train, len(train_src))
     common = {"k": model.config.k, "sequencing": spec.sequencing, "seed": recipe.seed, "cache": spec.cache}
-    train_set = SequenceDataset(train_src, variants=spec.variants, indices=range(n_train), **common)
-    val_src = open_source(spec, spec.val_split)
-    n_val = len(val_src) if spec.max_val is None else min(spec.max_val, len(val_src))
-    val_set = SequenceDataset(val_src, variants=spec.variants[:1], indices=range(n_val), **common)
-    val_items = [val_set[(i, 0, c)].to(dev, dtype) for i in range(n_val) for c in val_set.conditions]
+    train_set = SequenceDataset(open_source(spec, spec.train_split), variants=spec.variants, **common)
+    val_set = SequenceDataset(
+        open_source(spec, spec.val_split, limit="max_val"), variants=spec.variants[:1], **common
+    )
+    val_items = [val_set[(i, 0, c)].to(dev, dtype) for i in range(len(val_set)) for c in val_set.conditions]
+    n_train = len(train_set)
     per_rank = n_train // world
     stream = EpochStream(n_train, seed=recipe.seed, rank=rank, world=world,
                          start_epoch=state.keys_consumed // per_rank, start_pos=state.keys_consumed % per_rank)  # fmt: skip
@@ -302,7 +312,19 @@ def _save(ctx: _Context, optimizer, state: LoopState) -> None:
         )
 
 
+def _check_replicas(ctx: _Context) -> None:
+    """Under DDP every rank must end with the same weights (gradients were all-reduced)."""
+    if ctx.world <= 1:
+        return
+    total = torch.stack([p.detach().double().sum() for p in ctx.model.parameters()]).sum().reshape(1)
+    sums = [torch.zeros_like(total) for _ in range(ctx.world)]
+    dist.all_gather(sums, total)
+    if any(not torch.equal(s, sums[0]) for s in sums):
+        raise RuntimeError(f"DDP replicas diverged: parameter sums {[float(s) for s in sums]}")
+
+
 def _finish(ctx: _Context, state: LoopState) -> None:
+    _check_replicas(ctx)
     if ctx.rank != 0:
         return
     last_val = next((r for r in reversed(state.history) if r["kind"] == "val"), {})

@@ -44,35 +44,50 @@ class ModelSpec:
 
 
 @dataclass
+class SourceSpec:
+    """One source of captures: a gttdata generate recipe, built on the fly or read from its shards.
+
+    Args:
+        generate: The ``gttdata`` generate recipe describing the data.
+        overrides: ``key=value`` overrides of that recipe.
+        kind: ``"recipe"``: build every sample on the fly (deterministic per index, no disk);
+            ``"shards"``: read shards under ``root``, generating them first when absent.
+        root: Shard directory for ``kind: shards`` (default: the generate recipe's ``output_dir``).
+        max_train: Use at most this many of its training samples (None: all).
+        max_val: Use at most this many of its validation samples (None: all).
+    """
+
+    generate: str = "recipes/gttdata/tiny.yaml"
+    overrides: list[str] = field(default_factory=list)
+    kind: str = "recipe"
+    root: str | None = None
+    max_train: int | None = None
+    max_val: int | None = 4
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("recipe", "shards"):
+            raise ValueError(f"kind must be 'recipe' or 'shards', got {self.kind!r}")
+
+
+@dataclass
 class DataSpec:
     """Where training sequences come from and how each is presented.
 
     Args:
-        generate: The ``gttdata`` generate recipe describing the data.
-        generate_overrides: ``key=value`` overrides of that recipe.
-        source: ``"recipe"``: build every sample on the fly from the generate recipe (deterministic per
-            index, no disk); ``"shards"``: read shards under ``root``, generating them first when absent.
-        root: Shard directory for ``source: shards`` (default: the generate recipe's ``output_dir``).
+        sources: Capture sources; their splits are concatenated.
         train_split: Split used for training.
-        val_split: Held-out split used for validation.
+        val_split: Held-out split used for validation (each sample under every weighted condition).
         sequencing: Relative frequency of each sequencing condition (none / partial / full) per item.
         variants: Stored sample variants to draw from (``orig`` and augmentation names).
-        max_train: Use at most this many training samples (None: all).
-        max_val: Validate on at most this many samples (each under every condition with weight > 0).
         num_workers: DataLoader worker processes (items are prepared in the workers).
         cache: Keep prepared items in memory (per worker) after first use.
     """
 
-    generate: str = "recipes/gttdata/tiny.yaml"
-    generate_overrides: list[str] = field(default_factory=list)
-    source: str = "recipe"
-    root: str | None = None
+    sources: list[SourceSpec] = field(default_factory=lambda: [SourceSpec()])
     train_split: str = "train"
     val_split: str = "val"
     sequencing: dict[str, float] = field(default_factory=lambda: {"none": 1.0, "partial": 1.0, "full": 1.0})
     variants: list[str] = field(default_factory=lambda: ["orig"])
-    max_train: int | None = None
-    max_val: int | None = 4
     num_workers: int = 0
     cache: bool = True
 
@@ -129,8 +144,8 @@ class TrainRecipe:
     def __post_init__(self) -> None:
         if not self.stages:
             raise ValueError("stages must hold at least one stage")
-        if self.data.source not in ("recipe", "shards"):
-            raise ValueError(f"data.source must be 'recipe' or 'shards', got {self.data.source!r}")
+        if not self.data.sources:
+            raise ValueError("data.sources must hold at least one source")
         bad = sorted(set(self.data.sequencing) - {"none", "partial", "full"})
         if bad or not any(w > 0 for w in self.data.sequencing.values()):
             raise ValueError(

@@ -1,0 +1,70 @@
+"""``gttnet train``: run or resume a GTT-Net training recipe."""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import click
+
+from gttdata.cli import friendly_errors
+
+__all__ = ["register", "train_command"]
+
+
+@click.command("train")
+@click.argument("recipe", required=False, type=click.Path(dir_okay=False))
+@click.argument("overrides", nargs=-1)
+@click.option(
+    "--resume", "resume", type=click.Path(file_okay=False), help="Continue the run in RUN_DIR exactly."
+)
+@click.option(
+    "--out", "out", type=click.Path(file_okay=False), help="Run directory (default: runs/<name>-<time>)."
+)
+@click.option(
+    "--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="Override train.device."
+)
+@click.option("--max-steps", type=int, default=None, help="Stop (with a checkpoint) after this many steps.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@friendly_errors
+def train_command(recipe, overrides, resume, out, device, max_steps, quiet) -> None:
+    """Train GTT-Net with RECIPE (recipes/gttnet/*.yaml) and key.sub=value OVERRIDES.
+
+    Example: gttnet train recipes/gttnet/tiny.yaml stages.0.steps=5 --device cpu
+    """
+    from gttnet.train.loop import train
+    from gttnet.train.recipe import load_train_recipe
+
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if resume is None and recipe is None:
+        raise click.UsageError("give a RECIPE (e.g. recipes/gttnet/tiny.yaml) or --resume RUN_DIR")
+    if resume is not None and overrides:
+        raise click.UsageError(
+            "overrides cannot be combined with --resume: the run's recipe is used as saved"
+        )
+    try:
+        parsed = None if resume is not None else load_train_recipe(recipe, overrides)
+        result = train(parsed, out=out, device=device, resume=resume, max_steps=max_steps, progress=not quiet)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+    if int(os.environ.get("RANK", "0")) != 0:
+        return  # under torchrun only rank 0 reports
+    val = next((r for r in reversed(result.state.history) if r["kind"] == "val"), None)
+    status = (
+        "finished"
+        if result.finished
+        else f"stopped at step {result.state.global_step} (resume with --resume)"
+    )
+    click.echo(f"run {result.run_dir}: {status}")
+    if val is not None:
+        click.echo(
+            f"validation: loss {val['loss']:.4g}, MPJPE {val['mpjpe_mm']:.1f} mm (X_init {val['mpjpe_init_mm']:.1f} mm)"
+        )
+    if result.finished:
+        click.echo(f"model: {result.run_dir / 'model.pt'}")
+
+
+def register(main: click.Group) -> None:
+    """Attach ``train`` to the gttnet command group."""
+    main.add_command(train_command)

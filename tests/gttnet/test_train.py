@@ -1,0 +1,230 @@
+"""Training: recipes, stages, data bridge, the loop (overfit, determinism, resume) and DDP."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from gttnet.data import EpochStream, SequenceDataset, affinity_targets, open_source, prepare_item
+from gttnet.train.checkpoint import load_checkpoint
+from gttnet.train.loop import freeze_parts, train
+from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_recipe
+from gttnet.train.stages import Stage
+
+REPO = Path(__file__).resolve().parents[2]
+RECIPES = sorted((REPO / "recipes" / "gttnet").glob("*.yaml"))
+
+
+def _recipe(tmp_path: Path, *, stages=None, **overrides) -> dict:
+    """A tiny CPU recipe over recipes/gttdata/tiny.yaml, built on the fly."""
+    data = {
+        "name": "test",
+        "seed": 0,
+        "out_dir": str(tmp_path),
+        "model": {"builder": "gttnet_tiny", "settings": {"widths": [4, 4], "hidden": 4, "k": 6}},
+        "data": {
+            "sources": [{"generate": str(REPO / "recipes/gttdata/tiny.yaml"), "max_train": 2, "max_val": 1}],
+            "sequencing": {"none": 1.0, "partial": 1.0, "full": 1.0},
+        },
+        "train": {"batch_size": 1, "log_every": 1, "checkpoint_every": 1000, "device": "cpu"},
+        "stages": stages
+        or [
+            {"name": "affinity", "losses": {"autoencoding": 1.0, "affinity": 1.0}, "steps": 3},
+            {"name": "dloe", "losses": {"autoencoding": 1.0, "affinity": 1.0, "structure": 1.0}, "steps": 3},
+        ],
+    }
+    for key, value in overrides.items():
+        section, field = key.split("__")
+        data[section][field] = value
+    return data
+
+
+# --- recipes -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("path", RECIPES, ids=[p.name for p in RECIPES])
+def test_every_recipe_parses(path):
+    from gttnet.model.network import MODEL_BUILDERS
+
+    text = path.read_text()
+    assert text.startswith("# gttnet train ") or text.startswith("# torchrun "), (
+        "recipe must open with its command"
+    )
+    recipe = load_train_recipe(path)
+    assert recipe.model.builder in MODEL_BUILDERS
+    for src in recipe.data.sources:
+        assert (REPO / src.generate).is_file(), src.generate
+
+
+def test_recipe_set_is_complete():
+    names = {p.stem for p in RECIPES}
+    assert {"tiny", "paper", "pointnet", "selfsup", "sequencing_only", "default"} <= names
+
+
+def test_recipe_errors_are_one_line(tmp_path):
+    base = _recipe(tmp_path)
+    with pytest.raises(RecipeError, match=r"^trian: unknown key"):
+        parse_train_recipe(base, ["trian.batch_size=2"])
+    with pytest.raises(RecipeError, match=r"train.batch_size: expected int, found 'two'"):
+        parse_train_recipe(base, ["train.batch_size=two"])
+    with pytest.raises(RecipeError, match="unknown loss 'chamfer'"):
+        parse_train_recipe(base, ["stages.0.losses.chamfer=1"])
+    with pytest.raises(RecipeError, match="not an index"):
+        parse_train_recipe(base, ["stages.7.steps=1"])
+    with pytest.raises(RecipeError, match="key.sub=value"):
+        parse_train_recipe(base, ["stages"])
+    r = parse_train_recipe(base, ["stages.1.steps=5", "model.settings.top_q=1", "train.amp=true"])
+    assert r.stages[1].steps == 5 and r.model.settings["top_q"] == 1 and r.train.amp is True
+
+
+def test_stage_validation():
+    with pytest.raises(ValueError, match="exactly one of steps or epochs"):
+        Stage(name="s", losses={"affinity": 1.0})
+    with pytest.raises(ValueError, match="cannot freeze"):
+        Stage(name="s", losses={"affinity": 1.0}, steps=1, frozen=["solver"])
+    assert Stage(name="s", losses={"smoothness": 1.0}, steps=1).needs_solver
+    assert not Stage(name="s", losses={"affinity": 1.0, "structure": 0.0}, steps=1).needs_solver
+
+
+# --- data ----------------------------------------------------------------------------------------
+
+
+def test_affinity_targets_binary_symmetric_continuous_rowwise():
+    gt_nbr = np.array([[-1, 1], [0, 2], [1, -1]])
+    gt_w = np.array([[0.0, 1.0], [0.25, 0.75], [1.0, 0.0]])
+    nbr = np.array([[2, 1], [2, 0], [0, -1]])
+    binary, cont = affinity_targets(gt_nbr, gt_w, nbr)
+    assert binary.tolist() == [[0, 1], [1, 1], [0, 0]]
+    assert cont.tolist() == [[0, 1.0], [0.75, 0.25], [0, 0]]
+
+
+def test_prepare_item_inputs_do_not_depend_on_ground_truth(scene_factory):
+    from gttdata.capture.views import make_view
+
+    sample = scene_factory(n_joints=4, frames_per_camera=5, sigma_px=1.0)
+    obs, gt = make_view(sample, "full")
+    a = prepare_item(obs, gt, k=4)
+    _, gt_bad = make_view(sample.replace(points3d=sample.points3d + 5.0), "full")
+    b = prepare_item(obs, gt_bad, k=4)
+    torch.testing.assert_close(a.inputs.x_init, b.inputs.x_init)
+    assert not torch.allclose(a.points3d, b.points3d)
+
+
+def test_dataset_draws_are_keyed_not_stateful(tmp_path):
+    spec = parse_train_recipe(_recipe(tmp_path)).data
+    ds = SequenceDataset(open_source(spec, "train"), k=6, sequencing=spec.sequencing, seed=3)
+    names = [ds[(i, e, None)].name for e in range(3) for i in range(len(ds))]
+    again = [ds[(i, e, None)].name for e in range(3) for i in range(len(ds))]
+    assert names == again and len({n.split(":")[1] for n in names}) > 1
+
+
+def test_epoch_stream_splits_ranks_disjointly():
+    a = EpochStream(10, seed=0, rank=0, world=2)
+    b = EpochStream(10, seed=0, rank=1, world=2)
+    ka, kb = a.epoch_keys(4), b.epoch_keys(4)
+    assert len(ka) == len(kb) == 5 and not {k[0] for k in ka} & {k[0] for k in kb}
+    resumed = EpochStream(10, seed=0, start_epoch=1, start_pos=3)
+    it = iter(resumed)
+    assert [next(it) for _ in range(7)] == EpochStream(10, seed=0).epoch_keys(1)[3:]
+
+
+# --- loop ----------------------------------------------------------------------------------------
+
+
+def test_freeze_parts():
+    from gttnet.model.network import build_model
+
+    model = build_model("gttnet_pointnet", k=4)
+    trainable = freeze_parts(model, ["encoder", "pointnet"])
+    frozen = {id(p) for p in model.unet.encoders.parameters()} | {
+        id(p) for p in model.pointnet.head.parameters()
+    }
+    assert frozen and not frozen & {id(p) for p in trainable}
+    assert len(freeze_parts(model, [])) == len(list(model.parameters()))
+
+
+def test_training_loss_falls_on_one_sequence(tmp_path):
+    """Overfit one capture (fixed condition, no rotation): the stage loss falls at least 2x."""
+    stages = [{"name": "fit", "losses": {"autoencoding": 1.0, "affinity": 1.0}, "steps": 60, "lr": 0.01,
+               "schedule": "constant"}]  # fmt: skip
+    data = _recipe(tmp_path, stages=stages)
+    data["data"]["sources"][0]["max_train"] = 1
+    data["data"]["sequencing"] = {"full": 1.0}
+    data["train"]["rotation"] = "none"
+    res = train(parse_train_recipe(data), out=tmp_path / "run", progress=False)
+    loss = [r["loss"] for r in res.state.history if r["kind"] == "train"]
+    assert np.isfinite(loss).all()
+    assert np.mean(loss[-5:]) < loss[0] / 2
+
+
+@pytest.mark.slow
+def test_training_loss_falls_tenfold(tmp_path):
+    """Overfit one capture: the stage loss falls at least 10x."""
+    stages = [{"name": "fit", "losses": {"autoencoding": 1.0, "affinity": 1.0}, "steps": 400, "lr": 0.01,
+               "schedule": "constant"}]  # fmt: skip
+    data = _recipe(tmp_path, stages=stages)
+    data["model"]["settings"] = {"k": 6}
+    data["data"]["sources"][0]["max_train"] = 1
+    data["data"]["sequencing"] = {"full": 1.0}
+    data["train"]["rotation"] = "none"
+    res = train(parse_train_recipe(data), out=tmp_path / "run", progress=False)
+    loss = [r["loss"] for r in res.state.history if r["kind"] == "train"]
+    assert np.mean(loss[-10:]) < loss[0] / 10
+
+
+def _weights(model) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
+def test_same_seed_same_result(tmp_path):
+    r = parse_train_recipe(_recipe(tmp_path))
+    a = train(r, out=tmp_path / "a", progress=False)
+    b = train(r, out=tmp_path / "b", progress=False)
+    wa, wb = _weights(a.model), _weights(b.model)
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    assert [h["loss"] for h in a.state.history] == [h["loss"] for h in b.state.history]
+    for f in ("model.pt", "model.json", "log.jsonl", "loss_curve.png", "recipe.yaml", "checkpoint.pt"):
+        assert (tmp_path / "a" / f).is_file(), f
+
+
+def test_resume_mid_cascade_is_bit_exact(tmp_path):
+    r = parse_train_recipe(_recipe(tmp_path))
+    full = train(r, out=tmp_path / "full", progress=False)
+    part = train(r, out=tmp_path / "part", max_steps=4, progress=False)  # stops inside stage 2
+    assert not part.finished
+    ck = load_checkpoint(tmp_path / "part")
+    assert (ck["state"].stage_index, ck["state"].stage_step) == (1, 1)
+    resumed = train(resume=tmp_path / "part", progress=False)
+    assert resumed.finished
+    wf, wr = _weights(full.model), _weights(resumed.model)
+    assert all(torch.equal(wf[k], wr[k]) for k in wf)
+
+
+def _run_torchrun(tmp_path: Path) -> subprocess.CompletedProcess:
+    data = _recipe(tmp_path)
+    data["data"]["sources"][0]["max_train"] = 4
+    import yaml
+
+    path = tmp_path / "ddp.yaml"
+    path.write_text("# gttnet train ddp.yaml\n" + yaml.safe_dump(data))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--master_port", "29533",
+           "-m", "gttnet", "train", str(path), "--out", str(tmp_path / "ddp"), "--device", "cpu", "--quiet"]  # fmt: skip
+    return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300, check=False)
+
+
+@pytest.mark.slow
+def test_ddp_two_processes_gloo(tmp_path):
+    if shutil.which("torchrun") is None and sys.executable is None:
+        pytest.skip("torchrun not available")
+    proc = _run_torchrun(tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (tmp_path / "ddp" / "model.pt").is_file()
+    assert "finished" in proc.stdout

@@ -1,0 +1,64 @@
+"""``gttnet train`` end to end on the tiny recipe through the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from gttnet.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+TINY = str(REPO / "recipes" / "gttnet" / "tiny.yaml")
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+def in_repo(monkeypatch):
+    monkeypatch.chdir(REPO)  # recipes name data recipes relative to the repository root
+
+
+def test_train_tiny_then_resume_is_a_no_op(tmp_path, in_repo):
+    run = tmp_path / "run"
+    res = CliRunner().invoke(main, ["train", TINY, "stages.0.steps=2", "stages.1.steps=2", "--out", str(run),
+                                    "--device", "cpu", "--quiet"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "finished" in res.output and "MPJPE" in res.output
+    records = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    train = [r for r in records if r["kind"] == "train"]
+    assert [r["global_step"] for r in train] == [1, 2, 3, 4]
+    assert all(math.isfinite(r["loss"]) for r in records if "loss" in r)
+    assert {"loss_structure", "loss_affinity", "loss_autoencoding"} <= set(train[-1])
+    for f in ("model.pt", "model.json", "loss_curve.png", "checkpoint.pt", "recipe.yaml"):
+        assert (run / f).is_file(), f
+    again = CliRunner().invoke(main, ["train", "--resume", str(run), "--quiet"])
+    assert again.exit_code == 0, again.output
+
+
+def test_train_stop_and_resume(tmp_path, in_repo):
+    run = tmp_path / "run"
+    res = CliRunner().invoke(main, ["train", TINY, "--out", str(run), "--max-steps", "2", "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert "stopped at step 2" in res.output
+    res = CliRunner().invoke(main, ["train", "--resume", str(run), "--quiet"])
+    assert res.exit_code == 0 and "finished" in res.output, res.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["train", TINY, "trian.steps=1"], "trian: unknown key"),
+        (["train", TINY, "stages.0.steps=zero"], "stages.0.steps: expected int"),
+        (["train", TINY, "model.builder=gttnet_huge"], "unknown model builder"),
+        (["train", "--resume", "/nonexistent/run"], "no checkpoint to resume from"),
+        (["train"], "give a RECIPE"),
+    ],
+)
+def test_train_errors_are_one_line(args, message, in_repo):
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code != 0
+    assert message in res.output
+    assert "Traceback" not in res.output
