@@ -2,6 +2,7 @@
 
 Run:
     python benchmarks/bench_baselines.py --n-seq 5
+    python benchmarks/bench_baselines.py --n-seq 5 --methods "pseudo,dloe,dloe:lambda2=0.111,dct,hpf"
     python benchmarks/bench_baselines.py --recipe recipes/gttdata/paper.yaml --split test --n-seq 10 \
         capture.sigma_px=4
 
@@ -29,8 +30,18 @@ from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
 LEVEL = {"none": 0, "partial": 1, "full": 2}
 
 
+def parse_method(spec: str) -> tuple[str, dict]:
+    """``"dloe:lambda2=0.11,max_iter=10"`` -> ``("dloe", {"lambda2": 0.11, "max_iter": 10})``."""
+    name, _, opts = spec.partition(":")
+    options = {}
+    for item in filter(None, opts.split(";")):
+        k, _, v = item.partition("=")
+        options[k] = json.loads(v)
+    return name, options
+
+
 def run(recipe_path: str, split: str, n_seq: int, methods: list[str], overrides: list[str]) -> list[dict]:
-    """One row per (sequence, sequencing, method)."""
+    """One row per (sequence, sequencing, method); a method is ``name`` or ``name:key=value;key=value``."""
     recipe = load_recipe(recipe_path, overrides)
     needs = available_methods()
     rows = []
@@ -39,10 +50,11 @@ def run(recipe_path: str, split: str, n_seq: int, methods: list[str], overrides:
         for seq in ("none", "partial", "full"):
             obs, gt = make_view(sample, seq)
             for m in methods:
-                if LEVEL[needs[m]] > LEVEL[seq]:
+                name, options = parse_method(m)
+                if LEVEL[needs[name]] > LEVEL[seq]:
                     continue
                 t0 = time.perf_counter()
-                rec = reconstruct(obs, m)
+                rec = reconstruct(obs, name, **options)
                 rows.append(
                     {
                         "sequence": i,
@@ -91,7 +103,9 @@ def main() -> None:
     ap.add_argument("--recipe", default="recipes/gttdata/paper.yaml")
     ap.add_argument("--split", default="test")
     ap.add_argument("--n-seq", type=int, default=3)
-    ap.add_argument("--methods", default="pseudo,dloe,dct,hpf")
+    ap.add_argument(
+        "--methods", default="pseudo,dloe,dct,hpf", help="comma-separated; options as name:k=v;k=v"
+    )
     ap.add_argument("--threads", type=int, default=1, help="torch threads (1 = the 1-core runtime target)")
     ap.add_argument("overrides", nargs="*", help="recipe overrides key.sub=value")
     args = ap.parse_args()

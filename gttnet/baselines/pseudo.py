@@ -24,7 +24,7 @@ def top_q_affinity(cost: np.ndarray, *, q: int = 2) -> np.ndarray:
     Example:
         >>> c = np.array([[np.inf, 1.0, 2.0], [1.0, np.inf, 3.0], [2.0, 3.0, np.inf]])
         >>> top_q_affinity(c, q=1).astype(int).tolist()
-        [[0, 1, 0], [1, 0, 0], [0, 0, 0]]
+        [[0, 1, 1], [1, 0, 0], [1, 0, 0]]
     """
     n = cost.shape[0]
     A = np.zeros((n, n))

@@ -22,6 +22,7 @@ __all__ = [
     "reconstruct",
     "available_methods",
     "method_spec",
+    "check_sequencing",
 ]
 
 log = logging.getLogger(__name__)
