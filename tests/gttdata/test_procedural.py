@@ -119,13 +119,17 @@ def test_no_frame_to_frame_jump_in_gaits(kind):
     assert step.max() < 4.0 * np.median(step)
 
 
-def _planted_slips(m: Motion) -> list[float]:
-    """Horizontal toe displacement over each run of >= 6 frames with that foot flat on the floor, metres."""
+def _planted_slips(m: Motion, ankle_tol: float = 0.015) -> list[float]:
+    """Horizontal toe displacement over each run of >= 6 frames with that foot on the floor, metres.
+
+    The toe joint must be within 1.5 cm of its lowest height, the ankle within ``ankle_tol`` of its
+    own (runners land on the forefoot, so their heels never come fully down).
+    """
     p = m.positions
     slips = []
     for ankle, toe in ((SK.index("lfoot"), SK.index("ltoes")), (SK.index("rfoot"), SK.index("rtoes"))):
         za, zt = p[:, ankle, 2], p[:, toe, 2]
-        flat = (za < np.percentile(za, 2) + 0.015) & (zt < np.percentile(zt, 2) + 0.015)
+        flat = (za < np.percentile(za, 2) + ankle_tol) & (zt < np.percentile(zt, 2) + 0.015)
         edges = np.flatnonzero(np.diff(np.concatenate(([0], flat.astype(np.int8), [0]))))
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             if b - a >= 6:
@@ -135,7 +139,8 @@ def _planted_slips(m: Motion) -> list[float]:
 
 @pytest.mark.parametrize("kind", ["walk", "jog", "run", "turn", "idle", "gesture", "jump"])
 def test_planted_feet_do_not_skate(kind):
-    slips = [s for seed in (0, 1, 2) for s in _planted_slips(_motion(kind, seed))]
+    tol = 0.06 if kind == "run" else 0.015
+    slips = [s for seed in (0, 1, 2) for s in _planted_slips(_motion(kind, seed), tol)]
     assert slips and np.median(slips) < 0.03 and max(slips) < 0.06
 
 

@@ -114,7 +114,8 @@ def generate_motion(
         fps_hz: Frame rate, Hz (at least 10).
         speed_scale: Speed (gaits) or tempo (other kinds) as a multiple of the kind's mid-range
             value, in [0.3, 2]; drawn from the seed when None.
-        body_scale: Stature as a multiple of a 1.72 m reference subject, in [0.7, 1.3]; drawn
+        body_scale: Stature as a multiple of the 1.61 m reference subject (CMU subject 01's
+            proportions), in [0.7, 1.3]; drawn
             from the seed (stature 1.50-1.95 m) when None. Segment proportions always vary
             slightly with the seed.
 

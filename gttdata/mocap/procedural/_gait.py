@@ -131,7 +131,7 @@ def _foot_loads(s_left: np.ndarray, mode: str, stance: float) -> np.ndarray:
             heel = 1.0 - smootherstep((s - 0.25) / 0.2)
         else:
             on = smootherstep(s / 0.04) * (1.0 - smootherstep((s - stance + 0.04) / 0.04))
-            heel = 0.5 * (1.0 - smootherstep((s - 0.05) / 0.1))
+            heel = 0.2 * (1.0 - smootherstep((s - 0.02) / 0.08))  # runners load the ball of the foot
         loads += [on * heel, on * (1.0 - heel)]
     return np.stack(loads, axis=1)
 
@@ -220,7 +220,7 @@ def gait_track(
     amp = (
         np.clip(speed / 1.12 * 0.91 / leg, 0.25, 1.2)
         if mode == "walk"
-        else np.clip((0.7 + 0.58 * speed / 3.3) * (0.83 if kind == "jog" else 1.0), 0.75, 1.6)
+        else np.clip((0.59 + 0.49 * speed / 3.3) * (0.86 if kind == "jog" else 1.0), 0.6, 1.4)
     )
     style = _style(rng, mode, variant)
     _legs(track, s_left, mode, amp, style)

@@ -103,14 +103,16 @@ def place_on_ground(track: Track, body: Body, *, initial_heading: float) -> tupl
     # Foot locking in the heading frame: v_root = -(d/dt foot + yaw_rate x foot) of the supporting foot.
     foot_vel = np.gradient(feet[..., :2], dt, axis=0)
     spin = track.yaw_rate[:, None, None] * np.stack([-feet[..., 1], feet[..., 0]], axis=-1)
-    known = track.contact / np.maximum(track.contact.sum(axis=1, keepdims=True), 1e-6)
-    mix = track.contact_mix[:, None] * (track.contact.sum(axis=1, keepdims=True) > 1e-6)
-    w_feet = mix * known + (1.0 - mix) * w_feet
+    load = track.contact.sum(axis=1, keepdims=True)
+    mix = track.contact_mix[:, None] * (load > 1e-6)
+    w_feet = mix * track.contact / np.maximum(load, 1e-6) + (1.0 - mix) * w_feet
     v_lock = -np.einsum("tf,tfc->tc", w_feet, foot_vel + spin)
-    # Hand-tuned gait cycles do not keep the stance foot's speed exactly constant; averaging over
-    # about two steps trades some centimetres of foot slip for a realistic, steady pelvis speed.
+    # Gaits: average over about two steps (as plant_stance_feet assumed) so the pelvis speed is
+    # steady; the average is weighted by foot load, so flight phases do not drag it down.
     half_avg = int(round(GAIT_AVERAGING_S * track.fps_hz / 2))
-    v_lock += track.contact_mix[:, None] * (hann_smooth(v_lock, half_avg) - v_lock)
+    g = track.contact_mix[:, None] * load + (1.0 - track.contact_mix[:, None])
+    v_avg = hann_smooth(g * v_lock, half_avg) / np.maximum(hann_smooth(g, half_avg), 1e-9)
+    v_lock += track.contact_mix[:, None] * (v_avg - v_lock)
     v_air = _bridge(v_lock, gaps, half, dt, 0.0) + track.flight_vel
     v_body = w[:, None] * v_lock + (1.0 - w[:, None]) * v_air
     c, s = np.cos(heading), np.sin(heading)
