@@ -9,7 +9,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from h5py import h5d, h5s
+from h5py import h5d, h5g, h5s
 
 from gttdata.capture.sample import CaptureSample
 from gttdata.errors import MotionFormatError, ShardFormatError
@@ -79,6 +79,7 @@ class ShardReader:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._file: h5py.File | None = None
+        self._samples: h5py.Group | None = None
         self._pid: int | None = None
         self._attrs: dict | None = None
         self._names: list[str] | None = None
@@ -110,6 +111,7 @@ class ShardReader:
             except Exception:  # noqa: BLE001 - closing during interpreter shutdown may fail harmlessly
                 pass
         self._file = None
+        self._samples = None
 
     def _where(self, i: int | None = None, name: str | None = None) -> str:
         where = f"{self.path}"
@@ -152,6 +154,7 @@ class ShardReader:
             f.close()
             raise ShardFormatError(f"{self.path}: unreadable shard metadata ({_short(exc)})") from exc
         self._file, self._pid = f, os.getpid()
+        self._samples = f[SAMPLES_GROUP]
 
     # -- metadata ------------------------------------------------------------------------------------
 
@@ -199,7 +202,8 @@ class ShardReader:
     def _group(self, i: int) -> h5py.Group:
         name = self._name(i)
         try:
-            return self.file[SAMPLES_GROUP][name]
+            self.file  # noqa: B018 - (re)opens the file in this process, setting self._samples
+            return h5py.Group(h5g.open(self._samples.id, name.encode()))
         except (KeyError, OSError, RuntimeError) as exc:
             raise ShardFormatError(f"{self._where(i, name)}: unreadable group ({_short(exc)})") from exc
 
@@ -222,10 +226,7 @@ class ShardReader:
         where = self._where(i, name)
         g = self._group(i)
         arrays = {spec.name: self._read(g, spec.name, where) for spec in SAMPLE_FIELDS}
-        try:
-            skeleton = Skeleton.from_dict(_attr_json(g.attrs, "skeleton", where), source=where)
-        except MotionFormatError as exc:
-            raise ShardFormatError(str(exc)) from exc
+        skeleton = self._skeleton(_attr_str(g.attrs, "skeleton", where), where)
         meta = _attr_json(g.attrs, "meta", where)
         if variant != "orig":
             vg = g[VARIANTS_GROUP] if VARIANTS_GROUP in g else {}
@@ -249,6 +250,16 @@ class ShardReader:
             )
         except ValueError as exc:
             raise ShardFormatError(f"{where}: inconsistent arrays ({exc})") from exc
+
+    def _skeleton(self, text: str, where: str) -> Skeleton:
+        """Parse a skeleton attribute once per distinct text (every sample of a shard usually shares one)."""
+        cache = self.__dict__.setdefault("_skeletons", {})
+        if text not in cache:
+            try:
+                cache[text] = Skeleton.from_dict(json.loads(text), source=where)
+            except (json.JSONDecodeError, MotionFormatError) as exc:
+                raise ShardFormatError(f"{where}: attribute 'skeleton': {exc}") from exc
+        return cache[text]
 
     def _read(self, g: h5py.Group, key: str, where: str) -> np.ndarray:
         # The low-level calls skip h5py's per-object Python overhead: opening 13 datasets through
