@@ -7,6 +7,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gttdata.mocap.motion import Motion
 from gttdata.mocap.procedural import PROCEDURAL_KINDS, generate_motion, random_motion
@@ -267,6 +269,22 @@ def test_short_and_low_rate_motions_work_for_every_kind():
     for kind in PROCEDURAL_KINDS:
         m = generate_motion(kind, seed=5, duration_s=1.0, fps_hz=30.0)
         assert m.n_frames == 31 and m.bone_lengths().std(axis=0).max() < 1e-9
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    kind=st.sampled_from(PROCEDURAL_KINDS),
+    seed=st.integers(0, 2**63 - 1),
+    duration_s=st.floats(0.2, 4.0),
+    fps_hz=st.sampled_from([25.0, 30.0, 50.0, 120.0]),
+)
+def test_invariants_hold_for_any_seed_duration_and_rate(kind, seed, duration_s, fps_hz):
+    m = generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    assert m.n_frames == int(round(duration_s * fps_hz)) + 1
+    assert m.bone_lengths().std(axis=0).max() < 1e-9
+    assert m.positions[:, FEET, 2].min() > -0.03
+    assert _speeds(m).max() < 12.0
+    assert 1.45 <= m.provenance["stature_m"] <= 2.0
 
 
 def test_generation_is_fast():

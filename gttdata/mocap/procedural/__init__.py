@@ -1,17 +1,4 @@
-"""Built-in procedural motion source: seeded kinematic synthesis of human motion on the CMU-31 skeleton.
-
-Each motion is built as proper kinematics: a subject (stature and proportions drawn from the seed),
-anatomical joint angles from a per-kind generator (gait cycles, jumps, gestures, dance patterns,
-idling), exact forward kinematics (so bone lengths are constant), and a root path derived from
-ground contact (feet on the floor, no foot skating, ballistic flight). Joint positions follow the
-CMU BVH layout: a joint sits at the start of its bone, so lhipjoint/rhipjoint/lowerback coincide
-with the root, lowerneck and the clavicles with the thorax, and lhand/lthumb with the wrist.
-
-Example:
-    >>> m = generate_motion("walk", seed=3, duration_s=2.0)
-    >>> m.positions.shape, m.name
-    ((241, 31, 3), 'procedural/walk/s3')
-"""
+"""Built-in procedural motion source: seeded kinematic synthesis of human motion on the CMU-31 skeleton."""
 
 from __future__ import annotations
 
@@ -107,6 +94,14 @@ def generate_motion(
 ) -> Motion:
     """Synthesize one motion of a given kind, deterministically from ``seed``.
 
+    The motion is built as kinematics: a subject (stature and segment proportions drawn from the
+    seed, CMU subject-01 proportions on average), anatomical joint angles from a per-kind generator
+    (gait cycles, jumps, gestures, dance patterns, idling, or cross-faded segments of these), exact
+    forward kinematics (bone lengths constant to rounding), and a root path derived from ground
+    contact (feet on the floor, supporting foot planted, ballistic flight). Joint positions follow
+    the CMU BVH layout: a joint sits at the start of its bone, so lhipjoint/rhipjoint/lowerback
+    coincide with the root, lowerneck and the clavicles with the thorax, lhand/lthumb with the wrist.
+
     Args:
         kind: One of :data:`PROCEDURAL_KINDS`.
         seed: Non-negative seed; the same arguments always give bit-identical positions.
@@ -115,9 +110,8 @@ def generate_motion(
         speed_scale: Speed (gaits) or tempo (other kinds) as a multiple of the kind's mid-range
             value, in [0.3, 2]; drawn from the seed when None.
         body_scale: Stature as a multiple of the 1.61 m reference subject (CMU subject 01's
-            proportions), in [0.7, 1.3]; drawn
-            from the seed (stature 1.50-1.95 m) when None. Segment proportions always vary
-            slightly with the seed.
+            proportions), in [0.7, 1.3]; drawn from the seed (stature 1.50-1.95 m) when None.
+            Segment proportions always vary slightly with the seed.
 
     Returns:
         A :class:`Motion` on the CMU-31 skeleton: positions in metres, world frame z up with the
@@ -126,6 +120,11 @@ def generate_motion(
 
     Raises:
         ValueError: Unknown kind (the message lists the kinds) or an argument out of range.
+
+    Example:
+        >>> m = generate_motion("walk", seed=3, duration_s=2.0)
+        >>> m.positions.shape, m.name
+        ((241, 31, 3), 'procedural/walk/s3')
     """
     _check_args(kind, seed, duration_s, fps_hz, speed_scale, body_scale)
     rng = np.random.default_rng(int(seed))
