@@ -15,7 +15,8 @@ __all__ = ["action_track", "stand_base", "twist_pelvis"]
 # towards the gesturing side and the thorax twist, degrees.
 _GESTURES: dict[str, dict] = {
     "wave": {
-        "arm": ((95, 140), (5, 35), (-30, 0), (50, 100), (-10, 10)),
+        # External rotation turns the flexed forearm up into the frontal plane.
+        "arm": ((85, 130), (5, 35), (-100, -70), (60, 100), (-10, 10)),
         "head": 15,
         "twist": 5,
         "osc": True,
@@ -48,11 +49,12 @@ def twist_pelvis(track: Track, phi: np.ndarray) -> None:
 
     The thighs counter-rotate about their axes so the feet keep pointing forward, and each leg
     tilts forward or back by the angle that cancels its hip joint's fore-aft displacement (the
-    hips sit ~0.1 m either side of the root, ~0.85 m above the ankles); the ankles keep the feet flat.
+    hip joints sit ~0.08 m either side of the root, ~0.9 m above the ankles); the ankles keep the
+    feet flat.
     """
     track.add("root", 2, phi)
     track.add_sides("femur", 2, phi, -phi)
-    tilt = np.rad2deg(np.arcsin(0.11 * np.sin(np.deg2rad(phi))))
+    tilt = np.rad2deg(np.arcsin(0.085 * np.sin(np.deg2rad(phi))))
     track.add_sides("femur", 1, tilt, -tilt)
     track.add_sides("foot", 1, -tilt, tilt)
 
