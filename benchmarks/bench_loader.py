@@ -3,8 +3,8 @@
 Run:  python benchmarks/bench_loader.py [--samples 32] [--rounds 3] [--recipe recipes/gttdata/paper.yaml]
 
 Samples are built from the recipe's train split (paper protocol: ~300 images x 31 joints, two variants).
-Every option is written to a fresh directory and read back in a random order ``--rounds`` times with a
-warm page cache; the baseline loads the same original-capture arrays from one uncompressed ``.npy``
+Every option is written to a fresh directory, then all are read back in a random order, interleaved,
+``--rounds`` times with a warm page cache, keeping each one's best round; the baseline loads the same original-capture arrays from one uncompressed ``.npy``
 file per array. ``ratio`` = shard samples/s / npy samples/s (target >= 0.5 with compression on).
 """
 
@@ -96,7 +96,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recipe", default="recipes/gttdata/paper.yaml")
     ap.add_argument("--samples", type=int, default=32)
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=5)
     args = ap.parse_args()
     recipe = load_recipe(args.recipe)
     t = time.perf_counter()
@@ -111,13 +111,7 @@ def main() -> None:
         tmp = Path(tmp)
         _write_npy(tmp / "npy", groups)
         npy_bytes = sum(p.stat().st_size for p in (tmp / "npy").rglob("*.npy")) / args.samples
-        npy_rate = _read_npy(tmp / "npy", order, args.rounds)
-        head = f"| {'storage':<32} | {'MB/sample':>9} | {'write ms/sample':>15} | {'read samples/s':>14} | {'ratio vs npy':>12} |"
-        print(head)
-        print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
-        print(
-            f"| {'npy, orig arrays only':<32} | {npy_bytes / 1e6:>9.3f} | {'-':>15} | {npy_rate:>14.0f} | {1.0:>12.2f} |"
-        )
+        written = {}
         for k, (name, (comp, policy)) in enumerate(OPTIONS.items()):
             out = tmp / f"opt{k}"
             with _policy(**policy):
@@ -126,9 +120,22 @@ def main() -> None:
                     for g in groups:
                         w.write(g)
                 write_ms = (time.perf_counter() - t) / args.samples * 1e3
-            path = out / "shard-00000.h5"
-            rate = _read_shard(path, order, args.rounds)
-            size = os.path.getsize(path) / args.samples
+            written[name] = (out / "shard-00000.h5", write_ms)
+        # Best of interleaved rounds: other load on the machine hits every option alike.
+        best = {"npy": 0.0, **dict.fromkeys(written, 0.0)}
+        for _ in range(args.rounds):
+            best["npy"] = max(best["npy"], _read_npy(tmp / "npy", order, 1))
+            for name, (path, _) in written.items():
+                best[name] = max(best[name], _read_shard(path, order, 1))
+        npy_rate = best["npy"]
+        head = f"| {'storage':<32} | {'MB/sample':>9} | {'write ms/sample':>15} | {'read samples/s':>14} | {'ratio vs npy':>12} |"
+        print(head)
+        print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
+        print(
+            f"| {'npy, orig arrays only':<32} | {npy_bytes / 1e6:>9.3f} | {'-':>15} | {npy_rate:>14.0f} | {1.0:>12.2f} |"
+        )
+        for name, (path, write_ms) in written.items():
+            rate, size = best[name], os.path.getsize(path) / args.samples
             print(
                 f"| {name:<32} | {size / 1e6:>9.3f} | {write_ms:>15.1f} | {rate:>14.0f} | {rate / npy_rate:>12.2f} |"
             )
