@@ -16,16 +16,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
-import numpy as np
-import torch
+# The runtime target is one core: pin BLAS before numpy loads it (a busy machine makes OpenBLAS's
+# spinning worker threads cost ~0.3 s per small LAPACK call).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from gttdata.capture.views import make_view
-from gttdata.generate_plan import build_sample
-from gttdata.recipe import load_recipe
-from gttnet.baselines import available_methods, reconstruct
-from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from gttdata.capture.views import make_view  # noqa: E402
+from gttdata.generate_plan import build_sample  # noqa: E402
+from gttdata.recipe import load_recipe  # noqa: E402
+from gttnet.baselines import available_methods, reconstruct  # noqa: E402
+from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm  # noqa: E402
 
 LEVEL = {"none": 0, "partial": 1, "full": 2}
 

@@ -36,7 +36,7 @@ def _report(loaded, rec) -> dict:
 
 
 @click.command("reconstruct")
-@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False))
+@click.argument("input_path", metavar="INPUT", type=click.Path())
 @click.option(
     "--format",
     "fmt",
@@ -46,7 +46,11 @@ def _report(loaded, rec) -> dict:
     help="Input layout; auto picks it from the suffix (.h5, .mat, .json).",
 )
 @click.option(
-    "--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index in a shard."
+    "--sample",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Sample index in a shard file (or over a dataset directory's splits).",
 )
 @click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
 @click.option(
@@ -79,6 +83,9 @@ def reconstruct_cmd(
     input_path, fmt, sample, variant, method, sequencing, units, out_path, as_json, model_path, seed
 ):
     """Reconstruct the 3D joints of INPUT and recover the image order.
+
+    INPUT is a shard file (.h5), a dataset directory of shards, a DLOE demo file (.mat) or a GTT-Net
+    JSON file (.json).
 
     \b
     Example:

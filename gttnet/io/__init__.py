@@ -53,11 +53,13 @@ class LoadedInput:
 
 
 def detect_format(path: str | Path) -> str:
-    """Format name from a file suffix.
+    """Format name from a file suffix (a directory is a dataset of ``h5`` shards).
 
     Raises:
         ImportFormatError: For an unknown suffix.
     """
+    if Path(path).is_dir():
+        return "h5"  # a dataset directory of shards
     suffix = Path(path).suffix.lower()
     for name, suffixes in FORMATS.items():
         if suffix in suffixes:
@@ -91,11 +93,11 @@ def load_input(
     """Read a reconstruction input file into one sequencing view.
 
     Args:
-        path: Input file.
+        path: Input file, or a dataset directory of shards (``manifest.json``).
         fmt: ``"auto"`` (by suffix) or a key of :data:`FORMATS`.
         sequencing: ``"none"``, ``"partial"`` or ``"full"``; None: the richest the file supports
             (``full`` for shards and files with a global order, else ``partial``).
-        sample: Sample index inside a shard (h5 only).
+        sample: Sample index inside a shard file, or over all splits of a dataset directory (h5 only).
         variant: Input variant inside a shard (h5 only).
         units: Length unit of a foreign file (key of :data:`UNITS`); None: inches for the DLOE and
             GTT-Net layouts (their reference data). Shards are always metres.
