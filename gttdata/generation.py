@@ -80,7 +80,12 @@ def parse_shard_range(text: str | tuple[int, int] | None, n_blocks: int) -> rang
         ) from exc
     if not sep:
         hi = None if lo is None else lo + 1
-    return range(n_blocks)[slice(lo, hi)]
+    chosen = range(n_blocks)[slice(lo, hi)]
+    if n_blocks and not chosen:
+        raise RecipeError(
+            f"--shard-range: {text!r} selects none of the {n_blocks} blocks (0..{n_blocks - 1})"
+        )
+    return chosen
 
 
 def storage_attrs(recipe: GenerateRecipe) -> dict:

@@ -167,3 +167,11 @@ def test_register_and_preview(tmp_path, monkeypatch):
     )
     assert (manifests / "tiny.json").exists()
     assert "preview" in out.output
+
+
+@pytest.mark.parametrize(
+    ("rng", "message"), [("7:9", "selects none of the 3 blocks"), ("a:b", "expected 'a:b'")]
+)
+def test_bad_shard_range_is_one_line(tmp_path, rng, message):
+    line = _one_error_line(_run("generate", TINY, "--out", str(tmp_path), "--shard-range", rng, ok=False))
+    assert message in line
