@@ -163,13 +163,29 @@ def test_ground_truth_never_reaches_a_solver(scene, method):
     np.testing.assert_array_equal(a.order, b.order)
 
 
-@pytest.mark.parametrize("layout", ["mat", "json"])
+def _write_shard(sample, out_dir):
+    writer = pytest.importorskip("gttdata.shards.writer")
+    with writer.ShardWriter(out_dir, split="test") as w:
+        w.write(sample)
+    return sorted(out_dir.glob("*.h5"))[0]
+
+
+@pytest.mark.parametrize("layout", ["mat", "json", "h5"])
 def test_ground_truth_in_files_never_reaches_a_solver(tmp_path, scene, layout):
     """Replacing the ground-truth arrays stored in an input file leaves every method's output bit-identical."""
     good, bad = tmp_path / f"good.{layout}", tmp_path / f"bad.{layout}"
     rng = np.random.default_rng(9)
     p, n = scene.n_joints, scene.n_images
-    if layout == "mat":
+    if layout == "h5":
+        good = _write_shard(scene, tmp_path / "good")
+        bad_sample = dataclasses.replace(
+            scene,
+            points3d=rng.normal(size=scene.points3d.shape),
+            keypoints_gt_px=rng.normal(size=scene.keypoints_gt_px.shape).astype(np.float32),
+            affinity_w=rng.random(scene.affinity_w.shape),
+        )
+        bad = _write_shard(bad_sample, tmp_path / "bad")
+    elif layout == "mat":
         write_dloe_mat(scene, good)
         write_dloe_mat(scene, bad, X_GT=rng.normal(size=(3 * p, n)))
     else:
