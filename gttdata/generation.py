@@ -17,13 +17,12 @@ from gttdata.manifest import (
     MANIFEST_NAME,
     Manifest,
     build_manifest,
-    file_sha256,
     load_manifest,
-    scan_shards,
     verify_manifest,
     write_manifest,
 )
 from gttdata.recipe import GenerateRecipe, recipe_hash, recipe_to_dict
+from gttdata.shards.inventory import file_sha256, scan_shards
 from gttdata.shards.reader import ShardReader
 from gttdata.shards.schema import SHARD_SUFFIX, TMP_SUFFIX, shard_file_name
 from gttdata.shards.writer import ShardWriter
@@ -158,6 +157,8 @@ def _block_ok(out_dir: Path, plan: BlockPlan, attrs: dict, known: dict[str, str]
                 a = reader.attrs
                 if a.get("recipe_hash") != attrs["recipe_hash"]:
                     return f"{rel}: written by another recipe"
+                if a.get("generator") != attrs["generator"]:
+                    return f"{rel}: written by {a.get('generator')}, not {attrs['generator']}"
                 if (a.get("part"), a.get("first_index"), a.get("split")) != (part, nxt, plan.split):
                     return f"{rel}: part {a.get('part')} first_index {a.get('first_index')} out of sequence"
                 reader.check()

@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import logging
 import os
-import re
 import subprocess
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from gttdata.errors import ManifestError, ShardFormatError
+from gttdata.shards.inventory import check_files, file_sha256, scan_shards, summarise_stats
 from gttdata.shards.reader import ShardReader
-from gttdata.shards.schema import SCHEMA_VERSION, SHARD_SUFFIX, TMP_SUFFIX, check_schema_version
+from gttdata.shards.schema import SCHEMA_VERSION, TMP_SUFFIX
 from gttdata.shards.writer import merge_stats
 
 __all__ = [
@@ -38,8 +37,6 @@ _log = logging.getLogger(__name__)
 MANIFEST_NAME = "manifest.json"
 #: Version of the manifest's JSON layout (independent of the shard schema version).
 MANIFEST_VERSION = "1.0"
-
-_SHARD_RE = re.compile(r"^shard-\d{5}(\.p\d+)?" + re.escape(SHARD_SUFFIX) + "$")
 
 
 @dataclass(frozen=True)
@@ -171,15 +168,6 @@ class Manifest:
         return sum(s.n_samples for s in self.shards_of(split))
 
 
-def file_sha256(path: str | Path, *, chunk: int = 1 << 22) -> str:
-    """SHA-256 hex digest of a file, read in 4 MiB chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
 @functools.lru_cache(maxsize=1)
 def git_revision() -> tuple[str | None, bool | None]:
     """``(sha, dirty)`` of the git checkout holding this package, ``(None, None)`` outside git."""
@@ -204,39 +192,9 @@ def git_revision() -> tuple[str | None, bool | None]:
     return (sha or None), bool(dirty)
 
 
-def scan_shards(root: str | Path) -> tuple[list[Path], list[Path]]:
-    """Shard files and leftover temporary files under ``root/<split>/``.
-
-    Returns:
-        ``(shards, temporaries)``, each sorted by path.
-    """
-    root = Path(root)
-    shards = sorted(p for p in root.glob(f"*/shard-*{SHARD_SUFFIX}") if _SHARD_RE.match(p.name))
-    tmps = sorted(root.glob(f"*/shard-*{SHARD_SUFFIX}{TMP_SUFFIX}"))
-    return shards, tmps
-
-
 def _split_order(recipe: dict, found: set[str]) -> list[str]:
     order = [s["name"] for s in recipe.get("splits", ())] if recipe else []
     return order + sorted(found - set(order))
-
-
-def _summarise(stats: dict) -> dict:
-    """Readable statistics from summed shard statistics."""
-    if not stats:
-        return {"n_samples": 0, "n_images": 0}
-    n = stats["n_samples"]
-    return {
-        "n_samples": n,
-        "n_images": stats["n_images"],
-        "images_per_sample_mean": round(stats["n_images"] / max(n, 1), 3),
-        "images_per_sample_min": stats["n_images_min"],
-        "images_per_sample_max": stats["n_images_max"],
-        "missing_rate": round(1.0 - stats["n_visible"] / max(stats["n_joint_slots"], 1), 6),
-        "sigma_px_mean": round(stats["sigma_px_sum"] / stats["sigma_px_n"], 6)
-        if stats["sigma_px_n"]
-        else None,
-    }
 
 
 def _read_entry(root: Path, path: Path) -> tuple[ShardEntry, dict]:
@@ -339,7 +297,7 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
         splits[split] = {
             "n_samples": sum(e.n_samples for e, _ in mine),
             "n_shards": len(mine),
-            "statistics": _summarise(stats),
+            "statistics": summarise_stats(stats),
         }
     sha, dirty = git_revision()
     return Manifest(
@@ -356,7 +314,7 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
         rig=recipe.get("rig") or {},
         variants=variants,
         splits=splits,
-        statistics=_summarise(total),
+        statistics=summarise_stats(total),
         shards=tuple(e for e, _ in entries),
     )
 
@@ -450,37 +408,4 @@ def verify_manifest(root: str | Path, manifest: Manifest | None = None, *, deep:
     """
     root = Path(root)
     manifest = manifest or load_manifest(root)
-    problems: list[str] = []
-    for e in manifest.shards:
-        path = root / e.path
-        if not path.is_file():
-            problems.append(f"{e.path}: missing (expected {e.bytes} bytes)")
-            continue
-        size = path.stat().st_size
-        if size != e.bytes:
-            problems.append(
-                f"{e.path}: size: expected {e.bytes} bytes, found {size} (truncated or rewritten)"
-            )
-            continue
-        digest = file_sha256(path)
-        if digest != e.sha256:
-            problems.append(
-                f"{e.path}: sha256: expected {e.sha256[:16]}..., found {digest[:16]}... (corrupt)"
-            )
-            continue
-        try:
-            with ShardReader(path) as reader:
-                check_schema_version(reader.attrs.get("schema_version"), source=e.path)
-                if deep:
-                    reader.check()
-        except ShardFormatError as exc:
-            problems.append(str(exc))
-    listed = {e.path for e in manifest.shards}
-    shards, tmps = scan_shards(root)
-    for p in shards:
-        rel = p.relative_to(root).as_posix()
-        if rel not in listed:
-            problems.append(f"{rel}: shard not listed in the manifest (from another run?)")
-    for p in tmps:
-        problems.append(f"{p.relative_to(root).as_posix()}: leftover temporary file of an interrupted run")
-    return problems
+    return check_files(root, manifest.shards, deep=deep)

@@ -28,7 +28,7 @@ from gttdata.shards.schema import (
     shard_file_name,
 )
 
-__all__ = ["ShardInfo", "ShardWriter", "sample_stats", "variant_from_orig"]
+__all__ = ["ShardInfo", "ShardWriter", "merge_stats", "sample_stats", "variant_from_orig"]
 
 _log = logging.getLogger(__name__)
 
