@@ -24,15 +24,17 @@ class CaptureDataset:
     :meth:`set_epoch`. Shard handles are opened lazily in the process that reads (DataLoader workers
     included); nothing here imports torch.
 
-    Example:
-        >>> import torch  # doctest: +SKIP
-        >>> ds = CaptureDataset("data/gttdata/tiny", split="train", sequencing=["none", "partial"], variant="all")
-        >>> loader = torch.utils.data.DataLoader(  # N differs per sample: one sample per step
-        ...     ds, batch_size=None, shuffle=True, num_workers=2, persistent_workers=True)
-        >>> for epoch in range(2):
-        ...     ds.set_epoch(epoch)  # with persistent workers, pass the epoch through a sampler instead
-        ...     for item in loader:
-        ...         x2d, X = item["obs"]["keypoints_px"], item["gt"]["points3d"]  # (N, J, 2), (N, J, 3)
+    Example (not run as a doctest: needs torch and a generated dataset)::
+
+        import torch
+
+        ds = CaptureDataset("data/gttdata/tiny", split="train", sequencing=["none", "partial"], variant="all")
+        # N differs per sample: one sample per step (batch_size=None) or a custom collate_fn.
+        loader = torch.utils.data.DataLoader(ds, batch_size=None, shuffle=True, num_workers=2)
+        for epoch in range(2):
+            ds.set_epoch(epoch)  # workers are re-created each epoch (persistent_workers=False)
+            for item in loader:
+                x2d, X = item["obs"]["keypoints_px"], item["gt"]["points3d"]  # (N, J, 2), (N, J, 3)
 
     Args:
         root: Dataset directory (with ``manifest.json``).

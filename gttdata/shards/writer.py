@@ -121,10 +121,11 @@ class ShardWriter:
     file when the file holds ``max_samples`` samples or when one more sample of the size of the last one
     would exceed ``max_bytes``. Both depend only on the content, so identical input gives identical files.
 
-    Example:
-        >>> with ShardWriter(out_dir, split="train", max_samples=256) as w:  # doctest: +SKIP
-        ...     for group in samples:  # [orig, *variants]
-        ...         w.write(group)
+    Example::
+
+        with ShardWriter(out_dir, split="train", max_samples=256) as w:
+            for group in samples:  # [orig, *variants] from gttdata.generate_plan.build_sample
+                w.write(group)
 
     Args:
         out_dir: Directory of the shard files (created).
