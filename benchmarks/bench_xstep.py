@@ -1,6 +1,6 @@
 """Benchmark of the X-step solvers: pinned (dense torch, sparse SuperLU) against the dense 3N reference.
 
-Run:  python benchmarks/bench_xstep.py [--sizes 100 200 300 500 1000] [--joints 31] [--max-dense-gb 6]
+Run:  python benchmarks/bench_xstep.py [--sizes 100 200 300 500 1000] [--threads 1] [--max-dense-gb 6]
 
 Each problem is N images of J joints from 4 ring cameras 3 m away, 10 % of joints missing, and an
 affinity with Q ~ 3 links per row (the true temporal chain, as GTT-Net's Q = 2 plus a within-stream
@@ -96,7 +96,10 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--max-dense-gb", type=float, default=6.0)
     p.add_argument("--devices", nargs="+", default=["cpu", "cuda"])
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     args = p.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for dev in args.devices:
         if dev == "cuda" and not torch.cuda.is_available():

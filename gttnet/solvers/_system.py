@@ -1,4 +1,4 @@
-"""Assembly and solution of the per-joint X-step linear systems, dense (torch) or sparse (SciPy)."""
+"""The per-joint X-step linear systems: their slot parameterisation and the dense batched torch solve."""
 
 from __future__ import annotations
 
@@ -6,14 +6,11 @@ import logging
 import warnings
 from dataclasses import dataclass
 
-import numpy as np
 import torch
-from scipy.sparse import csc_matrix
-from scipy.sparse.linalg import splu
 
 from gttnet.errors import GttNetError
 
-__all__ = ["SingularStructureError", "StructureSystem", "build_system", "solve_dense", "solve_sparse"]
+__all__ = ["SingularStructureError", "StructureSystem", "build_system", "solve_dense"]
 
 log = logging.getLogger(__name__)
 
@@ -116,31 +113,35 @@ def _block_diag_term(V0, VE, nE, W, n):
     return d00, d0E, dEE
 
 
-def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
-    """Batched dense Cholesky over the active unknowns of every system; autograd-friendly.
+@dataclass
+class _Layout:
+    """Unknown ordering of the dense path: slot 0 of every image, then each system's extra slots."""
 
-    Unknowns are ordered as every image's slot 0 (its depth, or x when missing) in image order, then
-    the extra slots of the system, padded to the largest count. The slot-0 block is then a plain
-    elementwise product with M (no gather), which keeps assembly cheap next to the factorisation.
+    order: torch.Tensor  # (S, E) flat index (image * 2 + slot - 1) of each extra unknown
+    pad: torch.Tensor  # (S, E) padding unknowns
+    nE: torch.Tensor  # (S, E) image of each extra unknown
+    V0: torch.Tensor  # (S, N, 3) slot-0 directions
+    VE: torch.Tensor  # (S, E, 3) extra directions (zero on pads)
 
-    Args:
-        M: Laplacian part, shape ``(B, N, N)``.
-        sys: The systems.
 
-    Returns:
-        X, shape ``(B, N, J, 3)``.
-    """
+def _layout(sys: StructureSystem) -> _Layout:
     s, n, _ = sys.active.shape
-    b, j = sys.batch, sys.joints
     extra = sys.active[:, :, 1:].reshape(s, 2 * n)
     count = extra.sum(1)
     emax = int(count.max()) if s else 0
     order = torch.argsort((~extra).to(torch.int8), dim=1, stable=True)[:, :emax]
-    pad = torch.arange(emax, device=M.device).unsqueeze(0) >= count.unsqueeze(1)
+    pad = torch.arange(emax, device=extra.device).unsqueeze(0) >= count.unsqueeze(1)
     nE, sE = order // 2, order % 2 + 1
-    ar = torch.arange(s, device=M.device)[:, None]
-    V0 = sys.V[:, :, 0]
-    VE = sys.V[ar, nE, sE]  # (S, E, 3), zero on pads (inactive slots)
+    ar = torch.arange(s, device=extra.device)[:, None]
+    return _Layout(order=order, pad=pad, nE=nE, V0=sys.V[:, :, 0], VE=sys.V[ar, nE, sE])
+
+
+def _assemble_dense(M: torch.Tensor, sys: StructureSystem, lay: _Layout) -> tuple[torch.Tensor, torch.Tensor]:
+    """H ``(S, N + E, N + E)`` and rhs ``(S, N + E, 1)``; the slot-0 block is M times ray dot products."""
+    s, n, _ = sys.active.shape
+    b, j = sys.batch, sys.joints
+    emax = lay.nE.shape[1]
+    V0, VE, nE = lay.V0, lay.VE, lay.nE
     M4 = M.unsqueeze(1).expand(b, j, n, n)
     H00 = (M4 * (V0 @ V0.transpose(-1, -2)).view(b, j, n, n)).reshape(s, n, n)
     ME = M4.gather(-1, nE.view(b, j, 1, emax).expand(b, j, n, emax)).reshape(s, n, emax)
@@ -151,110 +152,94 @@ def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
         H00 = H00 + torch.diag_embed(d00)
         H0E = H0E + d0E
         HEE = HEE + dEE
-    HEE = HEE + torch.diag_embed(pad.to(M.dtype))
+    HEE = HEE + torch.diag_embed(lay.pad.to(M.dtype))
     H = torch.cat([torch.cat([H00, H0E], -1), torch.cat([H0E.transpose(-1, -2), HEE], -1)], -2)
     q = _linear_term(M, sys)
+    ar = torch.arange(s, device=M.device)[:, None]
     rhs = torch.cat([(V0 * q).sum(-1), (VE * q[ar, nE]).sum(-1)], -1).unsqueeze(-1)
+    return H, rhs
+
+
+def _factor(H: torch.Tensor) -> tuple[str, tuple[torch.Tensor, ...]]:
     L, info = torch.linalg.cholesky_ex(H)
-    if bool((info != 0).any()):
-        warnings.warn(
-            "X-step system not numerically positive definite (ill-conditioned lambda2 or dtype); using LU",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        z = torch.linalg.solve(H, rhs)
-    else:
-        z = torch.cholesky_solve(rhs, L)
+    if not bool((info != 0).any()):
+        return "chol", (L,)
+    warnings.warn(
+        "X-step system not numerically positive definite (ill-conditioned lambda2 or dtype); using LU",
+        RuntimeWarning,
+        stacklevel=4,
+    )
+    return "lu", torch.linalg.lu_factor(H)
+
+
+def _solve_factored(kind: str, fac: tuple[torch.Tensor, ...], rhs: torch.Tensor) -> torch.Tensor:
+    return torch.cholesky_solve(rhs, fac[0]) if kind == "chol" else torch.linalg.lu_solve(*fac, rhs)
+
+
+def _to_points(z: torch.Tensor, sys: StructureSystem, lay: _Layout) -> torch.Tensor:
+    s, n, _ = sys.active.shape
     z = z.squeeze(-1)
     # Pads map to inactive slots (zero direction), so scattering their zero values is harmless.
-    zE = torch.zeros(s, 2 * n, dtype=z.dtype, device=z.device).scatter(1, order, z[:, n:])
-    zf = torch.cat([z[:, :n].unsqueeze(-1), zE.view(s, n, 2)], -1)
-    return sys.to_points(zf)
+    zE = torch.zeros(s, 2 * n, dtype=z.dtype, device=z.device).scatter(1, lay.order, z[:, n:])
+    return sys.to_points(torch.cat([z[:, :n].unsqueeze(-1), zE.view(s, n, 2)], -1))
 
 
-def _assemble(Mb: np.ndarray, nz, V: np.ndarray, active: np.ndarray, W: np.ndarray | None):
-    """Sparse matrix of one system from its image slots (float64 NumPy); returns (H, pos)."""
-    n = V.shape[0]
-    pos = np.full((n, 3), -1, dtype=np.int64)
-    pos[active] = np.arange(int(active.sum()))
-    ri, ci, vals = nz
-    VV = np.einsum("ksd,ktd->kst", V[ri], V[ci])
-    rows = np.broadcast_to(pos[ri][:, :, None], VV.shape)
-    cols = np.broadcast_to(pos[ci][:, None, :], VV.shape)
-    data = [(vals[:, None, None] * VV).ravel()]
-    rr, cc = [rows.ravel()], [cols.ravel()]
-    if W is not None:
-        D = np.einsum("nsd,nde,nte->nst", V, W, V)
-        data.append(D.ravel())
-        rr.append(np.broadcast_to(pos[:, :, None], D.shape).ravel())
-        cc.append(np.broadcast_to(pos[:, None, :], D.shape).ravel())
-    data, rr, cc = np.concatenate(data), np.concatenate(rr), np.concatenate(cc)
-    keep = (rr >= 0) & (cc >= 0)
-    size = int(active.sum())
-    return csc_matrix((data[keep], (rr[keep], cc[keep])), shape=(size, size)), pos
+class _DenseSolve(torch.autograd.Function):
+    """X(M) with an adjoint backward: one extra triangular solve instead of differentiating the factorisation.
 
-
-class _SparseSolve(torch.autograd.Function):
-    """X = solve(M); backward: adjoint solve with the same factors, dL/dM = -sum_joints G X^T."""
+    With H z = rhs, ``lam = H^-1 dL/dz`` (H symmetric) and ``dL/dM = -sum_joints G X^T`` where
+    ``G_n = sum_slots lam v`` (see ``_sparse``); the ray terms do not depend on M.
+    """
 
     @staticmethod
     def forward(ctx, M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:  # noqa: D102
-        s, n, _ = sys.active.shape
-        Mn = M.detach().cpu().double().numpy()
-        V = sys.V.detach().cpu().double().numpy()
-        act = sys.active.cpu().numpy()
-        q = _linear_term(M.detach(), sys).cpu().double().numpy()
-        W = None if sys.W is None else sys.W.detach().cpu().double().numpy()
-        nzs = []
-        for b in range(Mn.shape[0]):
-            ri, ci = np.nonzero(Mn[b])
-            nzs.append((ri, ci, Mn[b][ri, ci]))
-        zs = np.zeros((s, n, 3))
-        factors = []
-        for k in range(s):
-            H, pos = _assemble(
-                Mn[k // sys.joints], nzs[k // sys.joints], V[k], act[k], None if W is None else W[k]
-            )
-            rhs = np.einsum("nsd,nd->ns", V[k], q[k])[act[k]]
-            try:
-                lu = splu(H, permc_spec="MMD_AT_PLUS_A")
-            except RuntimeError as exc:
-                raise SingularStructureError(f"X-step system {k} is singular: {exc}") from exc
-            zs[k][act[k]] = lu.solve(rhs)
-            factors.append((lu, pos))
-        z = torch.as_tensor(zs, dtype=M.dtype, device=M.device)
-        X = sys.to_points(z)
-        ctx.factors, ctx.sys = factors, sys
+        lay = _layout(sys)
+        H, rhs = _assemble_dense(M, sys, lay)
+        kind, fac = _factor(H)
+        X = _to_points(_solve_factored(kind, fac, rhs), sys, lay)
+        ctx.kind, ctx.fac, ctx.lay, ctx.sys = kind, fac, lay, sys
         ctx.save_for_backward(X)
         return X
 
     @staticmethod
     def backward(ctx, grad_X: torch.Tensor):  # noqa: D102
         (X,) = ctx.saved_tensors
-        sys = ctx.sys
+        lay, sys = ctx.lay, ctx.sys
         s, n, _ = sys.active.shape
-        V = sys.V.detach().cpu().double().numpy()
-        gX = grad_X.transpose(1, 2).reshape(s, n, 3).detach().cpu().double().numpy()
-        Xs = X.transpose(1, 2).reshape(s, n, 3).detach().cpu().double().numpy()
-        grad_M = np.zeros((sys.batch, n, n))
-        for k, (lu, pos) in enumerate(ctx.factors):
-            act = pos >= 0
-            g = np.einsum("nsd,nd->ns", V[k], gX[k])[act]
-            lam = np.zeros((n, 3))
-            lam[act] = lu.solve(g, trans="T")
-            G = np.einsum("ns,nsd->nd", lam, V[k])
-            grad_M[k // sys.joints] -= G @ Xs[k].T
-        return torch.as_tensor(grad_M, dtype=grad_X.dtype, device=grad_X.device), None
+        b, j = sys.batch, sys.joints
+        gX = grad_X.transpose(1, 2).reshape(s, n, 3)
+        ar = torch.arange(s, device=X.device)[:, None]
+        g = torch.cat([(lay.V0 * gX).sum(-1), (lay.VE * gX[ar, lay.nE]).sum(-1)], -1).unsqueeze(-1)
+        lam = _solve_factored(ctx.kind, ctx.fac, g).squeeze(-1)
+        G = lam[:, :n, None] * lay.V0
+        G = G.index_put((ar.expand_as(lay.nE), lay.nE), lam[:, n:, None] * lay.VE, accumulate=True)
+        Gf = G.view(b, j, n, 3).transpose(1, 2).reshape(b, n, 3 * j)
+        Xf = X.reshape(b, n, 3 * j)
+        return -(Gf @ Xf.transpose(-1, -2)), None
 
 
-def solve_sparse(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
-    """Per-system sparse LU (SuperLU, float64, CPU), differentiable w.r.t. M only.
+def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
+    """Batched dense Cholesky over the active unknowns of every system.
+
+    Unknowns are ordered as every image's slot 0 (its depth, or x when missing) in image order, then
+    the extra slots of the system, padded to the largest count. The slot-0 block is then a plain
+    elementwise product with M (no gather), which keeps assembly cheap next to the factorisation.
+    Gradients w.r.t. M use an adjoint solve with the saved factor; if the rays or centres need
+    gradients, plain autograd through the factorisation is used instead.
 
     Args:
         M: Laplacian part, shape ``(B, N, N)``.
         sys: The systems.
 
     Returns:
-        X, shape ``(B, N, J, 3)``, M's dtype and device.
+        X, shape ``(B, N, J, 3)``.
     """
-    return _SparseSolve.apply(M, sys)
+    geometry_grad = torch.is_grad_enabled() and any(
+        t is not None and t.requires_grad for t in (sys.V, sys.Ct, sys.W, sys.w)
+    )
+    if not geometry_grad:
+        return _DenseSolve.apply(M, sys)
+    lay = _layout(sys)
+    H, rhs = _assemble_dense(M, sys, lay)
+    kind, fac = _factor(H)
+    return _to_points(_solve_factored(kind, fac, rhs), sys, lay)

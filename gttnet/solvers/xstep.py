@@ -9,7 +9,8 @@ import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from gttnet.solvers._system import SingularStructureError, build_system, solve_dense, solve_sparse
+from gttnet.solvers._sparse import solve_sparse
+from gttnet.solvers._system import SingularStructureError, build_system, solve_dense
 
 __all__ = [
     "DLOESolver",
@@ -167,19 +168,27 @@ def _solve(A, centers, rays, visible, *, lambda1, lambda2, method, x_prior, prio
         raise ValueError("A must be non-negative")
     if xp is None:
         _check_solvable(A3, r, vis, lambda1)
-    M = _structure_matrix(A3, lambda1)
-    with torch.no_grad():
-        eps = (
-            prior_weight * (torch.diagonal(M, dim1=-2, dim2=-1).mean(-1) + 1e-12) if xp is not None else None
-        )
-    sys = build_system(C, r, vis, lambda2=lambda2, x_prior=xp, eps=eps)
     n = A3.shape[-1]
     if method == "auto":
         needs_geom_grad = torch.is_grad_enabled() and (r.requires_grad or C.requires_grad)
-        method = (
-            "sparse" if (A3.device.type == "cpu" and n >= SPARSE_FROM_N and not needs_geom_grad) else "dense"
-        )
-    X = solve_sparse(M, sys) if method == "sparse" else solve_dense(M, sys)
+        sparse_ok = A3.device.type == "cpu" and n >= SPARSE_FROM_N and not needs_geom_grad
+        method = "sparse" if sparse_ok else "dense"
+    if method == "sparse" and torch.is_grad_enabled() and (r.requires_grad or C.requires_grad):
+        raise ValueError("method 'sparse' differentiates w.r.t. A only; use method='dense' for ray gradients")
+    eps = None
+    if xp is not None:
+        with (
+            torch.no_grad()
+        ):  # diag(M) = column sums of L_out^2 + lambda1 diag(L_sym); a constant in backward
+            L_out, L_sym = laplacians(A3)
+            diag = L_out.square().sum(-2) + lambda1 * torch.diagonal(L_sym, dim1=-2, dim2=-1)
+            eps = prior_weight * (diag.mean(-1) + 1e-12)
+    sys = build_system(C, r, vis, lambda2=lambda2, x_prior=xp, eps=eps)
+    X = (
+        solve_sparse(A3, lambda1, sys)
+        if method == "sparse"
+        else solve_dense(_structure_matrix(A3, lambda1), sys)
+    )
     return X if batched else X[0]
 
 

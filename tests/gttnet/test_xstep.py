@@ -120,6 +120,16 @@ def test_gradcheck_wrt_affinity(method, lambda2):
     )
 
 
+def test_gradcheck_wrt_rays_dense():
+    A, C, r, vis = _random_case(seed=12, n=4, j=1, missing=((2, 0),))
+    rays = torch.tensor(r).requires_grad_(True)
+    assert torch.autograd.gradcheck(
+        lambda rr: solve_structure(A, C, rr, vis, method="dense"), (rays,), eps=1e-6, atol=1e-6
+    )
+    with pytest.raises(ValueError, match="ray gradients"):
+        solve_structure(A, C, rays, vis, method="sparse")
+
+
 def test_gradcheck_dense_reference():
     A, C, r, vis = _random_case(seed=2, n=4, j=2, missing=((1, 0),))
     A = (A + 0.05).requires_grad_(True)
@@ -248,8 +258,9 @@ def test_cuda_matches_cpu(lambda2):
     a = A.cuda().requires_grad_(True)
     X = solve_structure(a, C, r, vis, lambda2=lambda2)
     assert X.device.type == "cuda"
-    torch.testing.assert_close(X.cpu(), X_cpu)
+    torch.testing.assert_close(X.cpu(), X_cpu, rtol=1e-6, atol=1e-9)  # cond(H) ~ lambda2 for finite lambda2
     X.sum().backward()
     assert torch.isfinite(a.grad).all()
-    X32 = solve_structure(A.float().cuda(), C, r, vis, lambda2=lambda2)
-    torch.testing.assert_close(X32.double().cpu(), X_cpu, rtol=0, atol=1e-3)
+    if lambda2 is None:  # float32 cannot resolve a 1e6 ray weight against O(1) Laplacian terms
+        X32 = solve_structure(A.float().cuda(), C, r, vis, lambda2=lambda2)
+        torch.testing.assert_close(X32.double().cpu(), X_cpu, rtol=0, atol=1e-3)
