@@ -184,7 +184,7 @@ def pseudo_triangulate(
 
     Args:
         centers: Camera centre of each image in world, metres, shape ``(N, 3)``.
-        rays: Unit viewing rays in world, shape ``(N, J, 3)`` (anything where not visible).
+        rays: Viewing rays in world, shape ``(N, J, 3)``, normalised here (anything where not visible).
         visible: Observed-joint mask, shape ``(N, J)`` bool.
         cam_id: Camera of each image, shape ``(N,)`` int.
         min_angle_deg: For X_init, demote neighbours whose mean ray angle is within this many degrees of
@@ -214,12 +214,16 @@ def pseudo_triangulate(
             f"expected centers (N, 3), rays (N, J, 3), visible (N, J), cam_id (N,) with N={n}, J={j}; got "
             f"{C.shape}, {r.shape}, {vis.shape}, {cam.shape}"
         )
-    vis = (
-        vis
-        & np.all(np.isfinite(r), axis=-1)
-        & (np.abs(np.linalg.norm(np.nan_to_num(r), axis=-1) - 1.0) < 1e-6)
-    )
-    rT = np.ascontiguousarray(np.where(vis[..., None], r, 0.0).transpose(1, 0, 2))  # (J, N, 3)
+    r = np.where(vis[..., None], r, 0.0)
+    norm = np.linalg.norm(r, axis=-1)
+    bad = vis & ~(np.isfinite(norm) & (norm > 0))
+    if bad.any():
+        n_bad, p_bad = np.argwhere(bad)[0]
+        raise ValueError(
+            f"visible joint {p_bad} of image {n_bad} has a zero or non-finite ray: {r[n_bad, p_bad]}"
+        )
+    r = r / np.where(vis, norm, 1.0)[..., None]  # unit rays; zero where missing
+    rT = np.ascontiguousarray(r.transpose(1, 0, 2))  # (J, N, 3)
     mT = np.cross(C[None], rT)
     rC = np.einsum("jnk,nk->jn", rT, C)
     cost = np.full((n, n), np.inf)

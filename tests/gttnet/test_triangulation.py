@@ -135,6 +135,16 @@ def test_blocking_does_not_change_results(toy_sample):
     np.testing.assert_array_equal(a.valid, b.valid)
 
 
+def test_rays_are_normalised_and_bad_visible_rays_raise():
+    C = np.array([[0.0, 0, 0], [2.0, -1, 1]])
+    r = np.array([[[3.0, 0, 0]], [[0.0, 0.5, 0]]])
+    pt = pseudo_triangulate(C, r, np.ones((2, 1), bool), np.array([0, 1]))
+    assert pt.cost[0, 1] == pytest.approx(1.0 / 3.0)
+    r[1, 0] = np.nan
+    with pytest.raises(ValueError, match="joint 0 of image 1"):
+        pseudo_triangulate(C, r, np.ones((2, 1), bool), np.array([0, 1]))
+
+
 def test_errors():
     C = np.zeros((2, 3))
     r = np.ones((2, 1, 3)) / np.sqrt(3)

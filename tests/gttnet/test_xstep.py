@@ -204,6 +204,15 @@ def test_input_validation():
         solve_structure(-A, C, r, vis)
     with pytest.raises(ValueError, match="> 0"):
         noise_aware_lambda2(0.0, 1000.0, 3.0)
+    r_bad = r.copy()
+    r_bad[2, 1] = 0.0
+    with pytest.raises(ValueError, match="non-zero ray"):
+        solve_structure(A, C, r_bad, vis)
+    r_bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        solve_structure(A, C, r_bad, vis)
+    # Rays are normalised: scaled rays give the same structure.
+    torch.testing.assert_close(solve_structure(A, C, 2.5 * r, vis), solve_structure(A, C, r, vis))
 
 
 def test_float32_close_to_float64():
