@@ -33,13 +33,23 @@ class ContinuousConv(nn.Module):
         out_points: Output pseudo-points P_out.
         n_slots: Patch size K+1.
         hidden: Hidden width of both weight MLPs.
+        slot_rank: Also feed the slot MLP each slot's rank (one-hot over K+1). The neighbourhood is ranked
+            by pseudo-triangulation cost (or time under full sequencing), which is observation-only
+            information the geometry differences alone do not carry.
     """
 
-    def __init__(self, in_points: int, out_points: int, *, n_slots: int, hidden: int = 16) -> None:
+    def __init__(
+        self, in_points: int, out_points: int, *, n_slots: int, hidden: int = 16, slot_rank: bool = False
+    ) -> None:
         super().__init__()
-        self.in_points, self.out_points, self.n_slots = in_points, out_points, n_slots
+        self.in_points, self.out_points, self.n_slots, self.slot_rank = (
+            in_points,
+            out_points,
+            n_slots,
+            slot_rank,
+        )
         self.joint_mlp = _mlp(3 * n_slots, hidden, out_points)
-        self.slot_mlp = _mlp(3 * in_points, hidden, out_points)
+        self.slot_mlp = _mlp(3 * in_points + (n_slots if slot_rank else 0), hidden, out_points)
 
     def forward(
         self, x: torch.Tensor, index: torch.Tensor, mask: torch.Tensor
@@ -67,6 +77,9 @@ class ContinuousConv(nn.Module):
         w_joint = self.joint_mlp(joint_in)  # (N, P_in, P_out)
         slots = torch.einsum("npq,nspc->nsqc", w_joint, patch) / self.in_points
         rel = (patch - patch[:, :1]).reshape(x.shape[0], self.n_slots, -1)
+        if self.slot_rank:
+            rank = torch.eye(self.n_slots, dtype=x.dtype, device=x.device).expand(x.shape[0], -1, -1)
+            rel = torch.cat([rel, rank], dim=-1)
         w_slot = self.slot_mlp(rel) * m[..., None]  # (N, S, P_out)
         out = torch.einsum("nsq,nsqc->nqc", w_slot, slots) / m.sum(dim=1).clamp_min(1.0)[:, None, None]
         return out, slots

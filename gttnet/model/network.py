@@ -48,6 +48,7 @@ class GTTNetConfig:
             sees a joint along one ray direction solvable); None: no ridge (singular graphs then raise).
         solver_method: DLOE-layer linear solver, ``"auto"``, ``"dense"`` (batched Cholesky, GPU) or
             ``"sparse"`` (SuperLU on CPU; about 6x faster than dense there at N = 177 on 2 cores).
+        slot_rank: Give the slot-mixing MLPs each neighbour's rank (cost or time order); off in the paper.
     """
 
     n_joints: int = 31
@@ -63,6 +64,7 @@ class GTTNetConfig:
     domains: dict[str, int] = field(default_factory=dict)
     prior_weight: float | None = 1e-6
     solver_method: str = "auto"
+    slot_rank: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "widths", tuple(int(w) for w in self.widths))
@@ -124,7 +126,9 @@ class GTTNet(nn.Module):
         self.pointnet = (
             PointNetStream(config.domains, n_virtual=config.n_virtual) if config.pointnet else None
         )
-        self.unet = ContinuousConvUNet(in_points, config.widths, n_slots=config.k + 1, hidden=config.hidden)
+        self.unet = ContinuousConvUNet(
+            in_points, config.widths, n_slots=config.k + 1, hidden=config.hidden, slot_rank=config.slot_rank
+        )
         self.affinity = AffinityHead(config.affinity_mode, top_q=config.top_q)
         self._solver = solver
 

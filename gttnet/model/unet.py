@@ -42,23 +42,35 @@ class ContinuousConvUNet(nn.Module):
         widths: Encoder widths after the input, e.g. ``(16, 8, 4, 4)`` (paper: 31 → 16 → 8 → 4 → 4).
         n_slots: Patch size K+1.
         hidden: Hidden width of every weight MLP.
+        slot_rank: Feed every slot MLP the neighbour rank (see :class:`ContinuousConv`).
     """
 
-    def __init__(self, in_points: int, widths: tuple[int, ...], *, n_slots: int, hidden: int = 16) -> None:
+    def __init__(
+        self,
+        in_points: int,
+        widths: tuple[int, ...],
+        *,
+        n_slots: int,
+        hidden: int = 16,
+        slot_rank: bool = False,
+    ) -> None:
         super().__init__()
         if len(widths) < 1:
             raise ValueError("widths must hold at least one encoder level")
         full = (in_points, *widths)
         self.levels = full
         self.encoders = nn.ModuleList(
-            ContinuousConv(full[i], full[i + 1], n_slots=n_slots, hidden=hidden) for i in range(len(widths))
+            ContinuousConv(full[i], full[i + 1], n_slots=n_slots, hidden=hidden, slot_rank=slot_rank)
+            for i in range(len(widths))
         )
         self.enc_norms = nn.ModuleList(PointSetNorm(w) for w in widths)
         depth = len(widths)
         decoders = []
         for i in range(depth - 1, -1, -1):  # decoder producing level i
             n_in = full[i + 1] if i == depth - 1 else 2 * full[i + 1]
-            decoders.append(ContinuousConv(n_in, full[i], n_slots=n_slots, hidden=hidden))
+            decoders.append(
+                ContinuousConv(n_in, full[i], n_slots=n_slots, hidden=hidden, slot_rank=slot_rank)
+            )
         self.decoders = nn.ModuleList(decoders)
         self.dec_norms = nn.ModuleList(PointSetNorm(full[i]) for i in range(depth - 1, 0, -1))
 

@@ -19,7 +19,7 @@ import yaml
 from tqdm import tqdm
 
 from gttnet.data import EpochStream, SequenceDataset, TrainItem, collate_items, open_source
-from gttnet.model.inference import save_model
+from gttnet.model.inference import load_model, save_model
 from gttnet.model.inputs import random_rotation
 from gttnet.model.network import GTTNet, build_model
 from gttnet.train.checkpoint import LoopState, load_checkpoint, save_checkpoint, set_rng_states
@@ -188,6 +188,8 @@ def _dist_setup(device_name: str) -> tuple[int, int, int]:
     local = int(os.environ.get("LOCAL_RANK", "0"))
     if not dist.is_initialized():
         use_nccl = device_name != "cpu" and torch.cuda.is_available()
+        if use_nccl:
+            torch.cuda.set_device(local)
         dist.init_process_group(backend="nccl" if use_nccl else "gloo")
     return dist.get_rank(), dist.get_world_size(), local
 
@@ -240,7 +242,14 @@ def _prepare(
         model.load_state_dict(payload["model"])
         state = payload["state"]
         set_rng_states(payload["rng"])
-    else:
+    elif recipe.model.init is not None:
+        try:  # non-architecture settings (Q, lambdas, solver) may differ from the initial model's
+            model.load_state_dict(load_model(recipe.model.init).state_dict())
+        except RuntimeError as exc:
+            raise ValueError(
+                f"model.init {recipe.model.init}: architecture differs ({str(exc).splitlines()[0]})"
+            ) from exc
+    if payload is None:
         logger.write({"kind": "meta", "global_step": 0, "git_sha": _git_sha(), "seed": recipe.seed,
                       "device": str(dev), "world": world, "recipe": recipe_to_dict(recipe)})  # fmt: skip
     n_params = sum(p.numel() for p in model.parameters())

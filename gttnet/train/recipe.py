@@ -37,10 +37,13 @@ class ModelSpec:
     Args:
         builder: Registered builder name (``gttnet_tiny``, ``gttnet_base``, ``gttnet_pointnet``).
         settings: :class:`~gttnet.model.network.GTTNetConfig` fields overriding the builder's values.
+        init: Start from these weights (a model file or run directory) instead of a random initialisation;
+            the architecture must match.
     """
 
     builder: str = "gttnet_base"
     settings: dict[str, typing.Any] = field(default_factory=dict)
+    init: str | None = None
 
 
 @dataclass

@@ -79,6 +79,15 @@ def test_continuous_conv_equivariant_to_image_order():
     torch.testing.assert_close(out_p, out[perm])
 
 
+def test_slot_rank_input():
+    """slot_rank appends the one-hot neighbour rank to the slot MLP input."""
+    conv = ContinuousConv(4, 2, n_slots=4, hidden=8, slot_rank=True)
+    assert conv.slot_mlp[0].in_features == 3 * 4 + 4
+    gen = torch.Generator().manual_seed(4)
+    out, _ = conv(torch.randn(6, 4, 3, generator=gen), *patch_index(_random_nbr(6, 3, gen)))
+    assert out.shape == (6, 2, 3)
+
+
 def test_point_set_norm_invariances():
     norm = PointSetNorm(4).double()
     x = torch.randn(6, 4, 3, dtype=torch.float64)
