@@ -25,8 +25,13 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _METHODS = ("auto", "dense", "sparse")
-#: N from which ``method="auto"`` uses the sparse CPU path (measured by benchmarks/bench_xstep.py).
+#: N from which ``method="auto"`` uses the sparse CPU path. benchmarks/bench_xstep.py, J = 31, Q ~ 3:
+#: with one thread sparse wins from N ~ 150 (N = 200: 0.05 s vs 0.08 s); with 16 threads dense wins up
+#: to N ~ 300, so this is a compromise for small machines.
 SPARSE_FROM_N = 200
+#: Largest fraction of non-zero affinity entries for which ``"auto"`` picks the sparse path: the
+#: factorisation's fill grows with the density, and a dense A (e.g. A^D before top-Q) is faster dense.
+SPARSE_MAX_DENSITY = 0.05
 
 
 def laplacians(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -176,6 +181,7 @@ def _solve(A, centers, rays, visible, *, lambda1, lambda2, method, x_prior, prio
     if method == "auto":
         needs_geom_grad = torch.is_grad_enabled() and (r.requires_grad or C.requires_grad)
         sparse_ok = A3.device.type == "cpu" and n >= SPARSE_FROM_N and not needs_geom_grad
+        sparse_ok = sparse_ok and float((A3.detach() != 0).double().mean()) <= SPARSE_MAX_DENSITY
         method = "sparse" if sparse_ok else "dense"
     if method == "sparse" and torch.is_grad_enabled() and (r.requires_grad or C.requires_grad):
         raise ValueError("method 'sparse' differentiates w.r.t. A only; use method='dense' for ray gradients")
@@ -220,7 +226,8 @@ def solve_structure(
     ``method``: ``"dense"`` batches one Cholesky solve per joint (and per batch item) with torch.linalg;
     ``"sparse"`` assembles each joint's system sparsely and factorises it with SuperLU on CPU in float64
     (differentiable w.r.t. A through a custom backward, not w.r.t. rays or centres); ``"auto"`` uses
-    sparse on CPU from N = :data:`SPARSE_FROM_N`, dense otherwise. Gradients flow to ``A``.
+    sparse on CPU from N = :data:`SPARSE_FROM_N` when at most :data:`SPARSE_MAX_DENSITY` of A is
+    non-zero, dense otherwise. Gradients flow to ``A``.
 
     A unique solution needs every joint observed along two or more ray directions in every linked
     component of the graph. Without ``x_prior`` this is checked and :class:`SingularStructureError` is

@@ -224,13 +224,20 @@ def test_float32_close_to_float64():
     assert solve_structure(A.float(), C, r, vis, method="sparse").dtype == torch.float32
 
 
-def test_module_matches_function_and_auto_uses_sparse_for_large_n(scene_factory):
+def test_module_matches_function_and_auto_picks_sparse_for_large_sparse_a(scene_factory, monkeypatch):
+    import gttnet.solvers.xstep as xstep
+
+    calls = []
+    real = xstep.solve_sparse
+    monkeypatch.setattr(xstep, "solve_sparse", lambda *a: calls.append(1) or real(*a))
     sample = scene_factory(n_cameras=4, n_joints=3, frames_per_camera=55, seed=2)  # N = 220
     obs, gt = make_view(sample, "full")
     A = torch.tensor(gt.affinity_binary())
-    solver = DLOESolver(lambda1=0.1)
-    X = solver(A, obs.centers(), obs.rays(), obs.visible)
+    X = DLOESolver(lambda1=0.1)(A, obs.centers(), obs.rays(), obs.visible)
+    assert calls == [1]
     torch.testing.assert_close(X, solve_structure(A, obs.centers(), obs.rays(), obs.visible, method="dense"))
+    solve_structure(A + 0.01, obs.centers(), obs.rays(), obs.visible)  # dense A: dense path
+    assert calls == [1]
 
 
 def test_noise_aware_lambda2_beats_pinning_under_noise(scene_factory):
