@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -244,7 +245,9 @@ class SequenceDataset(torch.utils.data.Dataset):
         sequencing: Weight of each condition.
         variants: Variants to draw from.
         seed: Seed of the draws.
-        cache: Keep prepared items in memory.
+        cache: ``"memory"`` (per process), ``"disk"`` (``.pt`` files under ``cache_dir``, shared by every
+            DataLoader worker and kept for resumption) or ``"none"``.
+        cache_dir: Directory of the disk cache.
         indices: Sample indices to use (default: all).
     """
 
@@ -256,10 +259,16 @@ class SequenceDataset(torch.utils.data.Dataset):
         sequencing: dict[str, float],
         variants: Sequence[str] = ("orig",),
         seed: int = 0,
-        cache: bool = True,
+        cache: str = "memory",
+        cache_dir: str | Path | None = None,
         indices: Sequence[int] | None = None,
     ) -> None:
+        if cache not in ("memory", "disk", "none"):
+            raise ValueError(f"cache must be 'memory', 'disk' or 'none', got {cache!r}")
+        if cache == "disk" and cache_dir is None:
+            raise ValueError("cache 'disk' needs a cache_dir")
         self.source, self.k, self.seed, self.cache = source, k, seed, cache
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         names = [s for s, w in sequencing.items() if w > 0]
         w = np.array([sequencing[s] for s in names], dtype=np.float64)
         self.conditions, self.weights = names, w / w.sum()
@@ -280,9 +289,19 @@ class SequenceDataset(torch.utils.data.Dataset):
         ck = (index, sequencing, variant)
         if ck in self._cache:
             return self._cache[ck]
+        path = None
+        if self.cache == "disk":
+            path = self.cache_dir / f"{index:06d}-{sequencing}-{variant}-k{self.k}.pt"
+            if path.is_file():
+                return torch.load(path, weights_only=False)
         obs, gt = self.source.view(index, sequencing, variant)
         item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}")
-        if self.cache:
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            torch.save(item, tmp)
+            os.replace(tmp, path)  # atomic: workers and ranks may race on the same item
+        elif self.cache == "memory":
             self._cache[ck] = item
         return item
 

@@ -7,6 +7,7 @@ import logging
 import math
 import os
 import random
+import shutil
 import subprocess
 import time
 from dataclasses import dataclass
@@ -257,9 +258,15 @@ def _prepare(
 
     spec = recipe.data
     common = {"k": model.config.k, "sequencing": spec.sequencing, "seed": recipe.seed, "cache": spec.cache}
-    train_set = SequenceDataset(open_source(spec, spec.train_split), variants=spec.variants, **common)
+    cache = run_dir / "item_cache"
+    train_set = SequenceDataset(
+        open_source(spec, spec.train_split), variants=spec.variants, cache_dir=cache / "train", **common
+    )
     val_set = SequenceDataset(
-        open_source(spec, spec.val_split, limit="max_val"), variants=spec.variants[:1], **common
+        open_source(spec, spec.val_split, limit="max_val"),
+        variants=spec.variants[:1],
+        cache_dir=cache / "val",
+        **common,
     )
     val_items = [val_set[(i, 0, c)].to(dev, dtype) for i in range(len(val_set)) for c in val_set.conditions]
     n_train = len(train_set)
@@ -341,6 +348,7 @@ def _finish(ctx: _Context, state: LoopState) -> None:
             "validation": last_val, "trained_on": str(ctx.dev), "world": ctx.world}  # fmt: skip
     save_model(ctx.run_dir / "model.pt", ctx.model, card=card)
     _plot(ctx.run_dir, state.history)
+    shutil.rmtree(ctx.run_dir / "item_cache", ignore_errors=True)
 
 
 def train(

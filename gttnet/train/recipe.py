@@ -83,7 +83,9 @@ class DataSpec:
         sequencing: Relative frequency of each sequencing condition (none / partial / full) per item.
         variants: Stored sample variants to draw from (``orig`` and augmentation names).
         num_workers: DataLoader worker processes (items are prepared in the workers).
-        cache: Keep prepared items in memory (per worker) after first use.
+        cache: Where prepared items (X_init, neighbourhoods, targets) are kept after first use: ``"disk"``
+            (``RUN_DIR/item_cache``, shared by all workers, removed when the run finishes), ``"memory"``
+            (per worker process) or ``"none"``.
     """
 
     sources: list[SourceSpec] = field(default_factory=lambda: [SourceSpec()])
@@ -92,7 +94,7 @@ class DataSpec:
     sequencing: dict[str, float] = field(default_factory=lambda: {"none": 1.0, "partial": 1.0, "full": 1.0})
     variants: list[str] = field(default_factory=lambda: ["orig"])
     num_workers: int = 0
-    cache: bool = True
+    cache: str = "disk"
 
 
 @dataclass

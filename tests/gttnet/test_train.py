@@ -125,6 +125,21 @@ def test_dataset_draws_are_keyed_not_stateful(tmp_path):
     assert names == again and len({n.split(":")[1] for n in names}) > 1
 
 
+def test_disk_cache_round_trips_items(tmp_path):
+    spec = parse_train_recipe(_recipe(tmp_path)).data
+    src = open_source(spec, "train")
+    disk = SequenceDataset(src, k=6, sequencing=spec.sequencing, cache="disk", cache_dir=tmp_path / "c")
+    plain = SequenceDataset(src, k=6, sequencing=spec.sequencing, cache="none")
+    first, again, ref = disk[(0, 0, None)], disk[(0, 0, None)], plain[(0, 0, None)]
+    assert len(list((tmp_path / "c").glob("*.pt"))) == 1
+    for item in (first, again):
+        assert torch.equal(item.inputs.x_init, ref.inputs.x_init) and torch.equal(
+            item.inputs.nbr, ref.inputs.nbr
+        )
+    with pytest.raises(ValueError, match="cache_dir"):
+        SequenceDataset(src, k=6, sequencing=spec.sequencing, cache="disk")
+
+
 def test_epoch_stream_splits_ranks_disjointly():
     a = EpochStream(10, seed=0, rank=0, world=2)
     b = EpochStream(10, seed=0, rank=1, world=2)
