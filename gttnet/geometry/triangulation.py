@@ -84,9 +84,9 @@ def closest_points_on_rays(
 
 
 def _pair_block(
-    rows: slice, cols: slice, rT: np.ndarray, mT: np.ndarray, rC: np.ndarray, C: np.ndarray, cam: np.ndarray
+    rows: slice, cols: slice, rT: np.ndarray, mT: np.ndarray, rC: np.ndarray, C: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Validity, error and ``r_i . r_j`` of images ``rows`` against images ``cols``, each ``(J, B, Nc)``.
+    """Validity, error and ``r_i . r_j`` of images ``rows`` against other-camera images ``cols``, ``(J, B, Nc)``.
 
     Missing rays are zero vectors, so their depths come out exactly 0 and fail the positive-depth test:
     no separate visibility mask is needed. Operations are in place to limit memory traffic.
@@ -104,7 +104,6 @@ def _pair_block(
     sin2 = np.multiply(b, b)
     np.subtract(1.0, sin2, out=sin2)
     ok = sin2 > _PARALLEL_EPS
-    ok &= (cam[rows, None] != cam[None, cols])[None]
     np.maximum(sin2, _PARALLEL_EPS, out=sin2)
     s = b * e
     s -= d  # s * sin2
@@ -223,26 +222,34 @@ def pseudo_triangulate(
             f"visible joint {p_bad} of image {n_bad} has a zero or non-finite ray: {r[n_bad, p_bad]}"
         )
     r = r / np.where(vis, norm, 1.0)[..., None]  # unit rays; zero where missing
-    rT = np.ascontiguousarray(r.transpose(1, 0, 2))  # (J, N, 3)
-    mT = np.cross(C[None], rT)
-    rC = np.einsum("jnk,nk->jn", rT, C)
+    # Work in camera-sorted order: the pairs of camera a with every later camera form one rectangle per
+    # row block, so same-camera pairs and the mirrored half are never computed.
+    perm = np.argsort(cam, kind="stable")
+    Cp, cp = C[perm], cam[perm]
+    rT = np.ascontiguousarray(r[perm].transpose(1, 0, 2))  # (J, N, 3)
+    mT = np.cross(Cp[None], rT)
+    rC = np.einsum("jnk,nk->jn", rT, Cp)
     cost = np.full((n, n), np.inf)
     conv = np.full((n, n), np.nan)
     valid = np.zeros((n, n, j), dtype=bool)
-    # The cost, validity and convergence are symmetric: compute the upper block triangle and mirror.
-    for start in range(0, n, block_rows):
-        rows, cols = slice(start, min(start + block_rows, n)), slice(start, n)
-        ok, err, b = _pair_block(rows, cols, rT, mT, rC, C, cam)
-        cnt = ok.sum(0)
-        err[~ok] = 0.0
-        b[~ok] = 0.0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c_blk = np.where(cnt > 0, err.sum(0) / cnt, np.inf)
-            v_blk = np.where(cnt > 0, b.sum(0) / cnt, np.nan)
-        cost[rows, cols], conv[rows, cols] = c_blk, v_blk
-        cost[cols, rows], conv[cols, rows] = c_blk.T, v_blk.T
-        valid[rows, cols] = ok.transpose(1, 2, 0)
-        valid[cols, rows] = ok.transpose(2, 1, 0)
+    ends = np.r_[np.nonzero(np.diff(cp))[0] + 1, n]
+    for g0, g1 in zip(np.r_[0, ends[:-1]], ends, strict=True):
+        for start in range(g0, g1 if g1 < n else g0, block_rows):
+            rows, cols = slice(start, min(start + block_rows, g1)), slice(g1, n)
+            ok, err, b = _pair_block(rows, cols, rT, mT, rC, Cp)
+            cnt = ok.sum(0)
+            err[~ok] = 0.0
+            b[~ok] = 0.0
+            with np.errstate(invalid="ignore", divide="ignore"):
+                c_blk = np.where(cnt > 0, err.sum(0) / cnt, np.inf)
+                v_blk = np.where(cnt > 0, b.sum(0) / cnt, np.nan)
+            cost[rows, cols], conv[rows, cols] = c_blk, v_blk
+            cost[cols, rows], conv[cols, rows] = c_blk.T, v_blk.T
+            valid[rows, cols] = ok.transpose(1, 2, 0)
+            valid[cols, rows] = ok.transpose(2, 1, 0)
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(n)
+    cost, conv, valid = cost[np.ix_(inv, inv)], conv[np.ix_(inv, inv)], valid[inv][:, inv]
     if not np.isfinite(cost).any():
         raise GttNetError(
             "pseudo-triangulation found no triangulable joint: need >= 2 cameras sharing a joint"
