@@ -143,17 +143,27 @@ def _assemble_dense(M: torch.Tensor, sys: StructureSystem, lay: _Layout) -> tupl
     emax = lay.nE.shape[1]
     V0, VE, nE = lay.V0, lay.VE, lay.nE
     M4 = M.unsqueeze(1).expand(b, j, n, n)
-    H00 = (M4 * (V0 @ V0.transpose(-1, -2)).view(b, j, n, n)).reshape(s, n, n)
     ME = M4.gather(-1, nE.view(b, j, 1, emax).expand(b, j, n, emax)).reshape(s, n, emax)
     H0E = ME * (V0 @ VE.transpose(-1, -2))
     HEE = ME.gather(1, nE.unsqueeze(-1).expand(s, emax, emax)) * (VE @ VE.transpose(-1, -2))
+    d00 = None
     if sys.W is not None:
         d00, d0E, dEE = _block_diag_term(V0, VE, nE, sys.W, n)
-        H00 = H00 + torch.diag_embed(d00)
         H0E = H0E + d0E
         HEE = HEE + dEE
     HEE = HEE + torch.diag_embed(lay.pad.to(M.dtype))
-    H = torch.cat([torch.cat([H00, H0E], -1), torch.cat([H0E.transpose(-1, -2), HEE], -1)], -2)
+    if torch.is_grad_enabled():
+        H00 = (M4 * (V0 @ V0.transpose(-1, -2)).view(b, j, n, n)).reshape(s, n, n)
+        H00 = H00 if d00 is None else H00 + torch.diag_embed(d00)
+        H = torch.cat([torch.cat([H00, H0E], -1), torch.cat([H0E.transpose(-1, -2), HEE], -1)], -2)
+    else:  # write the big slot-0 block in place: one memory pass fewer than torch.cat (CPU-bound at N > 300)
+        H = M.new_empty(s, n + emax, n + emax)
+        torch.mul(M4, (V0 @ V0.transpose(-1, -2)).view(b, j, n, n), out=H[:, :n, :n].view(b, j, n, n))
+        if d00 is not None:
+            H[:, :n, :n].diagonal(dim1=-2, dim2=-1).add_(d00)
+        H[:, :n, n:] = H0E
+        H[:, n:, :n] = H0E.transpose(-1, -2)
+        H[:, n:, n:] = HEE
     q = _linear_term(M, sys)
     ar = torch.arange(s, device=M.device)[:, None]
     rhs = torch.cat([(V0 * q).sum(-1), (VE * q[ar, nE]).sum(-1)], -1).unsqueeze(-1)
