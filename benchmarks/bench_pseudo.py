@@ -4,6 +4,7 @@ Run:  python benchmarks/bench_pseudo.py [--sizes 100 200 300 400 500 600] [--blo
 
 The problem is 4 ring cameras (3 m, f = 1000 px) filming 31 points on a moving body, 10 % missing,
 1 px noise; BLAS is pinned to one thread before NumPy is imported. Reports the median of --repeats.
+Measured 2026-11-24 at N = 600: 0.14-0.15 s on the 2-core dev VM, 0.42 s on the GPU host's Xeon core.
 """
 
 from __future__ import annotations

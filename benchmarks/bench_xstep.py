@@ -7,6 +7,11 @@ affinity with Q ~ 3 links per row (the true temporal chain, as GTT-Net's Q = 2 p
 link). Every method is timed in the same run; the dense reference is skipped (and marked so, never
 extrapolated) where its (J, 3N, 3N) system would exceed --max-dense-gb. Times are the median of
 --repeats runs after one warm-up, forward only and forward + backward w.r.t. A.
+
+Measured 2026-11-24 (Xeon, 1 thread / 16 threads; H100), N = 500, seconds (speed-up vs reference):
+    CPU 1 thread:   reference 3.51, pinned-sparse 0.110 (32x; 45x with backward), pinned-dense 0.565 (6x)
+    CPU 16 threads: reference 0.47, pinned-dense 0.109 (4.3x), pinned-sparse 0.121 (3.9x); N = 1000: 11x
+    CUDA:           reference 0.059, pinned-dense 0.012 (4.9x); N = 1000: 0.025 vs 0.212 (8.5x)
 """
 
 from __future__ import annotations

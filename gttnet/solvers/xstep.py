@@ -25,9 +25,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _METHODS = ("auto", "dense", "sparse")
-#: N from which ``method="auto"`` uses the sparse CPU path. benchmarks/bench_xstep.py, J = 31, Q ~ 3:
-#: with one thread sparse wins from N ~ 150 (N = 200: 0.05 s vs 0.08 s); with 16 threads dense wins up
-#: to N ~ 300, so this is a compromise for small machines.
+#: N from which ``method="auto"`` uses the sparse CPU path. benchmarks/bench_xstep.py (J = 31, Q ~ 3):
+#: with one thread sparse wins from N ~ 100 (N = 200: 0.044 s vs 0.076 s dense); with 16 threads the
+#: dense path wins up to N ~ 500, so this is a compromise aimed at small machines.
 SPARSE_FROM_N = 200
 #: Largest fraction of non-zero affinity entries for which ``"auto"`` picks the sparse path: the
 #: factorisation's fill grows with the density, and a dense A (e.g. A^D before top-Q) is faster dense.
