@@ -16,13 +16,16 @@ Frames and units follow :mod:`gttdata.cameras`: world z-up in metres, OpenCV cam
 from __future__ import annotations
 
 from gttnet.geometry.neighbours import chain_affinity, neighbourhoods, temporal_chain_affinity
+from gttnet.geometry.ordering import graph_components, spectral_order
 from gttnet.geometry.triangulation import PseudoTriangulation, closest_points_on_rays, pseudo_triangulate
 
 __all__ = [
     "PseudoTriangulation",
     "chain_affinity",
     "closest_points_on_rays",
+    "graph_components",
     "neighbourhoods",
     "pseudo_triangulate",
+    "spectral_order",
     "temporal_chain_affinity",
 ]
