@@ -149,6 +149,18 @@ class TrainRecipe:
     def __post_init__(self) -> None:
         if not self.stages:
             raise ValueError("stages must hold at least one stage")
+        from gttnet.model.network import MODEL_BUILDERS, GTTNetConfig
+
+        if self.model.builder not in MODEL_BUILDERS:
+            raise ValueError(
+                f"model.builder: unknown model builder {self.model.builder!r}; known: {sorted(MODEL_BUILDERS)}"
+            )
+        known = {f.name for f in dataclasses.fields(GTTNetConfig)}
+        bad = sorted(set(self.model.settings) - known)
+        if bad:
+            raise ValueError(
+                f"model.settings.{bad[0]}: unknown model setting; known: {', '.join(sorted(known))}"
+            )
         if not self.data.sources:
             raise ValueError("data.sources must hold at least one source")
         bad = sorted(set(self.data.sequencing) - {"none", "partial", "full"})

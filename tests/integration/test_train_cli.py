@@ -57,8 +57,9 @@ def test_train_stop_and_resume(tmp_path, in_repo):
         (["train"], "give a RECIPE"),
     ],
 )
-def test_train_errors_are_one_line(args, message, in_repo):
-    res = CliRunner().invoke(main, args)
+def test_train_errors_are_one_line(args, message, in_repo, tmp_path):
+    res = CliRunner().invoke(main, [*args, "--out", str(tmp_path / "run")] if args[1:2] == [TINY] else args)
     assert res.exit_code != 0
     assert message in res.output
     assert "Traceback" not in res.output
+    assert not (tmp_path / "run").exists()  # a bad recipe creates no run directory
