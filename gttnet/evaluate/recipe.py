@@ -1,0 +1,352 @@
+"""EvalRecipe: the typed form of a ``recipes/gttnet/eval_*.yaml`` file, with ``key.sub=value`` overrides."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import types
+import typing
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from gttdata.capture.views import SEQUENCING
+from gttnet.errors import GttNetError
+
+__all__ = [
+    "EvalRecipeError",
+    "DataSpec",
+    "SweepValue",
+    "SweepSpec",
+    "MethodEntry",
+    "RuntimeSpec",
+    "EvalRecipe",
+    "PAPER_SWEEPS",
+    "load_eval_recipe",
+    "parse_eval_recipe",
+    "apply_overrides",
+]
+
+
+class EvalRecipeError(GttNetError):
+    """An evaluation recipe is malformed (names the key, what was expected and what was found)."""
+
+
+@dataclass
+class DataSpec:
+    """Where the test sequences come from: a generate recipe built in memory, or a dataset directory.
+
+    Args:
+        generate: A ``gttdata`` generate recipe (YAML path); samples are built with ``build_sample``.
+        dataset: A generated dataset directory (with ``manifest.json``); exclusive with ``generate``.
+        split: Split to draw the sequences from.
+        n_sequences: Number of sequences (samples ``0 .. n-1``); None = the whole split.
+        overrides: ``key=value`` overrides of the generate recipe applied to every condition.
+        variant: Stored variant to evaluate (``"orig"`` or an augmentation name).
+    """
+
+    generate: str | None = None
+    dataset: str | None = None
+    split: str = "test"
+    n_sequences: int | None = None
+    overrides: list[str] = field(default_factory=list)
+    variant: str = "orig"
+
+    def __post_init__(self) -> None:
+        if (self.generate is None) == (self.dataset is None):
+            raise ValueError("give exactly one of generate (a gttdata recipe) or dataset (a directory)")
+        if self.n_sequences is not None and self.n_sequences < 1:
+            raise ValueError(f"n_sequences must be >= 1, got {self.n_sequences}")
+
+
+@dataclass
+class SweepValue:
+    """One value of a sweep and the extra generate-recipe overrides it needs.
+
+    Args:
+        value: The swept variable's value (written to ``errors.csv``).
+        overrides: Extra ``key=value`` overrides for this value only (e.g. a longer window at 7.5 Hz).
+        dataset: A dataset directory holding this condition (dataset sources only).
+    """
+
+    value: float
+    overrides: list[str] = field(default_factory=list)
+    dataset: str | None = None
+
+
+@dataclass
+class SweepSpec:
+    """One swept variable, each value applied as a generate-recipe override with the others at default.
+
+    Args:
+        name: Condition name (``noise``, ``frame_rate``, ``missing``...).
+        variable: The generate-recipe key the value overrides (e.g. ``capture.sigma_px``).
+        values: Values (numbers, or mappings ``{value, overrides, dataset}``).
+        label: Axis label of the plot.
+        scale: Factor from recipe units to plotted/recorded units (e.g. 100 for drop rate -> %).
+    """
+
+    name: str
+    variable: str
+    values: list[SweepValue]
+    label: str = ""
+    scale: float = 1.0
+
+
+@dataclass
+class MethodEntry:
+    """A method column of the evaluation: a registered method plus options.
+
+    Args:
+        name: Column name in the outputs (defaults to ``method``).
+        method: Registered reconstruction method (``pseudo``, ``dloe``, ``dct``, ``hpf``, ``gttnet``).
+        options: Method options, e.g. ``{model: runs/x/model.pt, q: 3}`` (``q`` = GTT-Net top-Q at test).
+        note: Free text recorded with every skip of this method (e.g. how to train the missing model).
+    """
+
+    name: str = ""
+    method: str = ""
+    options: dict[str, typing.Any] = field(default_factory=dict)
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.method and not self.name:
+            raise ValueError("a method entry needs method (or name)")
+        self.method = self.method or self.name
+        self.name = self.name or self.method
+
+
+@dataclass
+class RuntimeSpec:
+    """The runtime study: time per sequence against the number of images (paper Fig. 5a).
+
+    Args:
+        lengths: Sequence lengths in images.
+        methods: Methods to time (GTT-Net falls back to an untrained network when no model exists).
+        generate: Generate recipe whose test motions are long enough (window set per length).
+        split: Split to draw from.
+        repeats: Timed runs per length (the minimum is reported).
+        sequencing: Sequencing condition of the timed runs.
+        model: Trained GTT-Net model path; None = bundled, or untrained when none is installed.
+    """
+
+    lengths: list[int] = field(default_factory=lambda: [100, 200, 300, 400, 500, 600])
+    methods: list[str] = field(default_factory=lambda: ["dloe", "gttnet"])
+    generate: str = "recipes/gttdata/paper.yaml"
+    split: str = "test"
+    repeats: int = 1
+    sequencing: str = "none"
+    model: str | None = None
+
+
+@dataclass
+class EvalRecipe:
+    """A full evaluation: data, sweeps, sequencing conditions, methods and outputs.
+
+    Args:
+        name: Run name.
+        output_dir: Run directory (``errors.csv``, ``summary.md``, plots).
+        data: :class:`DataSpec`.
+        sweeps: Swept conditions; empty = one ``base`` condition.
+        sequencing: Sequencing conditions to run each method under.
+        methods: Method entries (a bare string is a method name).
+        workers: Worker processes over (condition, sample) jobs.
+        error_bars: ``ci95`` (95% t-interval of the mean) or ``std`` in the plots.
+        seed: Seed of the image shuffle under sequencing ``none`` (None = from the sample name).
+        runtime: Optional runtime study run after the sweeps.
+    """
+
+    name: str
+    output_dir: str
+    data: DataSpec
+    sweeps: list[SweepSpec] = field(default_factory=list)
+    sequencing: list[str] = field(default_factory=lambda: list(SEQUENCING))
+    methods: list[MethodEntry] = field(default_factory=list)
+    workers: int = 1
+    error_bars: str = "ci95"
+    seed: int | None = None
+    runtime: RuntimeSpec | None = None
+
+    def __post_init__(self) -> None:
+        bad = [s for s in self.sequencing if s not in SEQUENCING]
+        if bad or not self.sequencing:
+            raise ValueError(f"sequencing must be a non-empty list of {SEQUENCING}, got {self.sequencing}")
+        if not self.methods:
+            raise ValueError("methods must name at least one method")
+        names = [m.name for m in self.methods]
+        if len(set(names)) != len(names):
+            raise ValueError(f"method names must be unique, got {names}")
+        if self.error_bars not in ("ci95", "std"):
+            raise ValueError(f"error_bars must be ci95 or std, got {self.error_bars!r}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.data.dataset is not None and any(v.dataset is None for s in self.sweeps for v in s.values):
+            raise ValueError("a dataset source cannot apply sweep overrides: give each sweep value a dataset")
+
+
+#: The paper's sweeps (Fig. 3): noise sigma, per-camera frame rate, missing joints.
+PAPER_SWEEPS: list[dict] = [
+    {
+        "name": "noise",
+        "variable": "capture.sigma_px",
+        "label": "2-D noise sigma [px]",
+        "values": [0, 1, 2, 3, 4, 5],
+    },
+    {
+        "name": "frame_rate",
+        "variable": "capture.fps_hz",
+        "label": "frame rate per camera [Hz]",
+        "values": [7.5, 15, 30],
+    },
+    {
+        "name": "missing",
+        "variable": "capture.joint_drop_rate",
+        "label": "missing joints [%]",
+        "scale": 100.0,
+        "values": [0.0, 0.1, 0.2, 0.3, 0.4, 0.5],
+    },
+]
+
+
+def _type_name(tp: object) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _convert(tp: object, value: object, key: str) -> object:
+    origin = typing.get_origin(tp)
+    if tp is typing.Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        errors = []
+        for a in args:
+            try:
+                return _convert(a, value, key)
+            except EvalRecipeError as exc:
+                errors.append(str(exc))
+        raise EvalRecipeError(errors[0])
+    if tp is SweepValue and not isinstance(value, dict):
+        value = {"value": value}
+    if tp is MethodEntry and isinstance(value, str):
+        value = {"method": value}
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, key)
+    if origin is list:
+        if not isinstance(value, list):
+            raise EvalRecipeError(f"{key}: expected a list, found {value!r}")
+        (item,) = typing.get_args(tp)
+        return [_convert(item, v, f"{key}.{i}") for i, v in enumerate(value)]
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise EvalRecipeError(f"{key}: expected a mapping, found {value!r}")
+        return {str(k): v for k, v in value.items()}
+    return _convert_scalar(tp, value, key)
+
+
+def _convert_scalar(tp: object, value: object, key: str) -> object:
+    is_num = isinstance(value, int | float) and not isinstance(value, bool)
+    if tp is float and is_num:
+        return float(value)
+    if tp is int and is_num and float(value).is_integer():
+        return int(value)
+    if tp in (bool, str) and isinstance(value, tp):
+        return value
+    raise EvalRecipeError(f"{key}: expected {_type_name(tp)}, found {value!r}")
+
+
+def _build(cls: type, data: object, key: str) -> object:
+    if not isinstance(data, dict):
+        raise EvalRecipeError(f"{key or 'recipe'}: expected a mapping, found {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        where = f"{key}.{unknown[0]}" if key else unknown[0]
+        raise EvalRecipeError(f"{where}: unknown key; expected one of {', '.join(names)}")
+    kwargs = {k: _convert(hints[k], v, f"{key}.{k}" if key else k) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise EvalRecipeError(f"{key or 'recipe'}: {exc}") from exc
+
+
+def apply_overrides(data: dict, overrides: Sequence[str]) -> dict:
+    """Apply ``key.sub=value`` overrides (values parsed as YAML) to a nested mapping in place.
+
+    Args:
+        data: Raw recipe mapping.
+        overrides: E.g. ``["data.n_sequences=2", "methods=[pseudo,dloe]", "sweeps.0.values=[0,4]"]``.
+
+    Returns:
+        ``data``.
+    """
+    for item in overrides:
+        if "=" not in item:
+            raise EvalRecipeError(f"override {item!r}: expected key.sub=value, e.g. data.n_sequences=3")
+        path, raw = item.split("=", 1)
+        value = yaml.safe_load(raw) if raw.strip() else None
+        parts = path.strip().split(".")
+        node: object = data
+        for i, p in enumerate(parts):
+            last = i == len(parts) - 1
+            if isinstance(node, list):
+                if not p.isdigit() or int(p) >= len(node):
+                    raise EvalRecipeError(f"override {path}: {p!r} is not an index of a list of {len(node)}")
+                if last:
+                    node[int(p)] = value
+                else:
+                    node = node[int(p)]
+            elif isinstance(node, dict):
+                if last:
+                    node[p] = value
+                else:
+                    node = node.setdefault(p, {})
+            else:
+                raise EvalRecipeError(f"override {path}: {'.'.join(parts[:i])} is not a mapping or list")
+    return data
+
+
+def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
+    """Validate a raw recipe mapping (``sweeps: paper`` expands to :data:`PAPER_SWEEPS`).
+
+    Raises:
+        EvalRecipeError: One line naming the key.
+    """
+    data = dict(data)
+    for step in range(2):  # expand before the overrides (so they can index it) and after (sweeps=paper)
+        if data.get("sweeps") == "paper":
+            data["sweeps"] = copy.deepcopy(PAPER_SWEEPS)
+        if step == 0:
+            data = apply_overrides(data, overrides)
+    return _build(EvalRecipe, data, "")
+
+
+def load_eval_recipe(path: str | Path, overrides: Sequence[str] = ()) -> EvalRecipe:
+    """Read and validate an evaluation recipe.
+
+    Args:
+        path: YAML file.
+        overrides: ``key.sub=value`` strings.
+
+    Returns:
+        The validated :class:`EvalRecipe`.
+
+    Raises:
+        EvalRecipeError: e.g. ``eval_smoke.yaml: data.n_seq: unknown key; expected one of ...``.
+    """
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except FileNotFoundError as exc:
+        raise EvalRecipeError(f"{path}: recipe file not found") from exc
+    except yaml.YAMLError as exc:
+        raise EvalRecipeError(f"{path}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    if not isinstance(data, dict):
+        raise EvalRecipeError(f"{path}: expected a mapping at the top level, found {type(data).__name__}")
+    try:
+        return parse_eval_recipe(data, overrides)
+    except EvalRecipeError as exc:
+        raise EvalRecipeError(f"{Path(path).name}: {exc}") from exc

@@ -1,0 +1,159 @@
+"""Runtime study: seconds per sequence of GTT-Net and DLOE against the number of images (paper Fig. 5a)."""
+
+from __future__ import annotations
+
+import csv
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gttdata.capture.views import make_view
+from gttnet.errors import ModelError
+from gttnet.evaluate.recipe import RuntimeSpec
+
+__all__ = ["RuntimeResult", "gttnet_timer", "run_runtime"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RuntimeResult:
+    """Timings of a runtime study.
+
+    Args:
+        lengths: Requested images per sequence.
+        n_images: Images actually built per length.
+        seconds: Method -> best-of-``repeats`` seconds per sequence, per length.
+        notes: How each method was timed (e.g. an untrained network when no model is installed).
+        markdown: The speed-up table.
+    """
+
+    lengths: list[int]
+    n_images: list[int]
+    seconds: dict[str, list[float]]
+    notes: dict[str, str] = field(default_factory=dict)
+    markdown: str = ""
+
+
+def gttnet_timer(model: str | None = None):
+    """A callable ``obs -> points3d`` timing GTT-Net inference, and a note on which network it runs.
+
+    Uses the trained model when one loads; otherwise an untrained ``gttnet_base`` from
+    :func:`gttnet.model.network.build_model`. Inference time does not depend on the weights' values:
+    the same pseudo-triangulation, U-Net, top-Q affinity and sparse DLOE-layer solve run either way.
+
+    Returns:
+        ``(fn, note)``.
+    """
+    import torch
+
+    from gttnet.model.inputs import prepare_inputs
+
+    try:
+        from gttnet.model.inference import load_model
+
+        net = load_model(model)
+        note = f"trained model {model or 'bundled'}"
+    except ModelError as exc:
+        from gttnet.model.network import build_model
+
+        net = build_model("gttnet_base").eval()
+        note = f"untrained gttnet_base ({exc}); timing does not depend on the weights"
+
+    @torch.no_grad()
+    def run(obs) -> np.ndarray:
+        seq = prepare_inputs(obs, k=net.config.k)
+        return net([seq], solve=True)[0].x_est.numpy()
+
+    return run, note
+
+
+def _sample_of_length(spec: RuntimeSpec, length: int, rate: float | None):
+    from gttdata.generate_plan import build_sample
+    from gttdata.recipe import load_recipe
+
+    if rate is None:
+        probe = build_sample(load_recipe(spec.generate, ["capture.window_s=1.0"]), spec.split, 0)[0]
+        rate = probe.n_images / 1.0
+    window = length / rate
+    sample = build_sample(load_recipe(spec.generate, [f"capture.window_s={window:.6f}"]), spec.split, 0)[0]
+    return sample, rate
+
+
+def _speedup_markdown(res: RuntimeResult) -> str:
+    names = list(res.seconds)
+    head = "| images | " + " | ".join(f"{m} [s]" for m in names) + " |"
+    ratio = "dloe" in res.seconds and "gttnet" in res.seconds
+    lines = [
+        head + (" speed-up (DLOE / GTT-Net) |" if ratio else ""),
+        "|---|" + "---|" * (len(names) + ratio),
+    ]
+    for i, n in enumerate(res.n_images):
+        cells = [f"{res.seconds[m][i]:.3f}" for m in names]
+        if ratio:
+            cells.append(f"{res.seconds['dloe'][i] / res.seconds['gttnet'][i]:.1f}x")
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    if ratio:
+        mean = np.mean(np.array(res.seconds["dloe"]) / np.array(res.seconds["gttnet"]))
+        lines += ["", f"Mean speed-up: {mean:.1f}x (paper: ~30x against the open-source DLOE)."]
+    lines += ["", *[f"- {m}: {note}" for m, note in res.notes.items()]]
+    return "\n".join(lines) + "\n"
+
+
+def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = False) -> RuntimeResult:
+    """Time each method on one sequence per length; write ``runtime.csv``, ``runtime.md``, ``runtime.png``.
+
+    Sequences come from the first sample of ``spec.split`` of ``spec.generate`` with ``capture.window_s``
+    set so that the capture holds about ``length`` images.
+
+    Args:
+        spec: :class:`~gttnet.evaluate.recipe.RuntimeSpec`.
+        out_dir: Output directory.
+        progress: Log each timing at INFO.
+
+    Returns:
+        The :class:`RuntimeResult`.
+    """
+    import torch
+
+    from gttnet.baselines.registry import reconstruct
+    from gttnet.evaluate.plots import plot_runtime
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    runners, notes = {}, {}
+    for m in spec.methods:
+        if m == "gttnet":
+            runners[m], notes[m] = gttnet_timer(spec.model)
+        else:
+            runners[m] = lambda obs, m=m: reconstruct(obs, m).points3d
+            notes[m] = f"gttnet.baselines.reconstruct(obs, {m!r})"
+    notes["threads"] = f"torch threads {torch.get_num_threads()}, sequencing {spec.sequencing}"
+    res = RuntimeResult(list(spec.lengths), [], {m: [] for m in spec.methods}, notes)
+    rate = None
+    for length in spec.lengths:
+        sample, rate = _sample_of_length(spec, length, rate)
+        obs, _ = make_view(sample, spec.sequencing)
+        res.n_images.append(obs.n_images)
+        for m, fn in runners.items():
+            if length == spec.lengths[0]:
+                fn(obs)  # warm-up: imports, caches, first-call allocation
+            best = np.inf
+            for _ in range(spec.repeats):
+                t0 = time.perf_counter()
+                fn(obs)
+                best = min(best, time.perf_counter() - t0)
+            res.seconds[m].append(float(best))
+            (log.info if progress else log.debug)("runtime %s N=%d: %.3f s", m, obs.n_images, best)
+    res.markdown = _speedup_markdown(res)
+    with (out / "runtime.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["n_images", *spec.methods])
+        for i, n in enumerate(res.n_images):
+            w.writerow([n, *(f"{res.seconds[m][i]:.4f}" for m in spec.methods)])
+    (out / "runtime.md").write_text("# Runtime: seconds per sequence\n\n" + res.markdown)
+    plot_runtime(res.n_images, res.seconds, out / "runtime.png")
+    return res
