@@ -92,7 +92,7 @@ def _create() -> None:
         _log.info("offscreen GL backend: %s", platform)
         return
     if not user:
-        del os.environ["PYOPENGL_PLATFORM"]
+        os.environ.pop("PYOPENGL_PLATFORM", None)
     hint = (
         "PYOPENGL_PLATFORM is set by you; unset it to let gttdata try egl then osmesa"
         if user
