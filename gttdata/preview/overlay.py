@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from gttdata.capture.sample import CaptureSample
-from gttdata.preview._style import bone_sides, joint_sides, side_bgr_u8
+from gttdata.preview._style import CENTRE, LEFT, RIGHT, bone_sides, joint_sides, side_bgr_u8
 
 __all__ = [
     "BACKGROUND_BGR",
@@ -193,14 +193,14 @@ def contact_sheet(
         crop: Zoom every camera onto the subject (:func:`crop_windows`) instead of the whole image.
 
     Returns:
-        BGR image uint8 of shape ``(56 + V * th, 64 + C * tw, 3)`` for ``tile_px = (tw, th)`` and C
+        BGR image uint8 of shape ``(72 + V * th, 64 + C * tw, 3)`` for ``tile_px = (tw, th)`` and C
         columns (:func:`sheet_columns`); the tile of column k, camera v starts at
-        ``(x, y) = (64 + k * tw, 56 + v * th)``.
+        ``(x, y) = (64 + k * tw, 72 + v * th)``.
     """
     cols = sheet_columns(sample, max_images)
     V = sample.n_cameras
     tw, th = (int(x) for x in tile_px)
-    left, top = 64, 56
+    left, top = 64, 72
     sheet = np.zeros((top + V * th, left + len(cols) * tw, 3), np.uint8)
     sheet[:] = (8, 8, 8)
     windows = crop_windows(sample, aspect=tw / th, images=cols) if crop else None
@@ -211,6 +211,16 @@ def contact_sheet(
         f"columns in time order (ms){', zoomed on the subject' if crop else ''}"
     )
     cv2.putText(sheet, title, (6, 20), font, 0.5, (235, 235, 235), 1, cv2.LINE_AA)
+    x = 6
+    for text, colour in (
+        ("observed joints:", (200, 200, 200)),
+        ("left", side_bgr_u8(LEFT)),
+        ("right", side_bgr_u8(RIGHT)),
+        ("midline", side_bgr_u8(CENTRE)),
+        ("missing joint: x at its true position", MISSING_BGR),
+    ):
+        cv2.putText(sheet, text, (x, 42), font, 0.45, colour, 1, cv2.LINE_AA)
+        x += cv2.getTextSize(text, font, 0.45, 1)[0][0] + 10
     for v in range(V):
         y = top + v * th + th // 2
         cv2.putText(sheet, f"cam {v}", (6, y), font, 0.45, (235, 235, 235), 1, cv2.LINE_AA)

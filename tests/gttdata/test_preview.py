@@ -199,12 +199,12 @@ def test_contact_sheet_rows_are_cameras_and_columns_are_time(tiny_sample):
     tw, th = 60, 80
     sheet = contact_sheet(sample, tile_px=(tw, th), max_images=10)
     cols = sheet_columns(sample, 10)
-    assert sheet.shape == (56 + sample.n_cameras * th, 64 + 10 * tw, 3)
+    assert sheet.shape == (72 + sample.n_cameras * th, 64 + 10 * tw, 3)
     assert np.all(np.diff(sample.timestamp_s[cols]) > 0)
     assert np.allclose(sample.timestamp_s[cols], np.sort(tiny_sample.timestamp_s)[:10])
     for k, n in enumerate(cols):
         for v in range(sample.n_cameras):
-            tile = sheet[56 + v * th : 56 + (v + 1) * th, 64 + k * tw : 64 + (k + 1) * tw - 1]
+            tile = sheet[72 + v * th : 72 + (v + 1) * th, 64 + k * tw : 64 + (k + 1) * tw - 1]
             assert (tile != 8).any() == (v == sample.cam_id[n]), (k, v)
 
 
