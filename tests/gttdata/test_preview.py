@@ -282,3 +282,12 @@ def test_cli_preview_shard(tiny_dataset, tmp_path, extra, exit_code, expected):
     assert expected in res.output
     if exit_code == 0:
         assert "_3d.png" not in res.output and "timestamp_raster" not in res.output
+
+
+def test_timestamp_raster_adds_zoom_panel_for_dense_captures(tiny_sample, tmp_path):
+    pytest.importorskip("matplotlib")
+    from gttdata.preview.plots import plot_timestamp_raster
+
+    plain = cv2.imread(str(plot_timestamp_raster(tiny_sample, tmp_path / "a.png")))
+    zoomed = cv2.imread(str(plot_timestamp_raster(tiny_sample, tmp_path / "b.png", zoom_above=10)))
+    assert plain.shape[1] == zoomed.shape[1] and zoomed.shape[0] > 1.5 * plain.shape[0]
