@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 from dataclasses import asdict
@@ -99,13 +100,21 @@ class GTTNetReconstructor:
     Args:
         model_path: Model file or run directory; None uses the bundled model.
         device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
+        lambda2: Ray weight of the DLOE layer at inference; None keeps the model's own setting (rays
+            pinned for the bundled model). A finite, noise-aware value
+            (:func:`gttnet.solvers.xstep.noise_aware_lambda2`) lets joints leave their rays by about the
+            pixel noise; the learned affinity is unchanged.
     """
 
-    def __init__(self, model_path: str | Path | None = None, *, device: str = "auto") -> None:
+    def __init__(
+        self, model_path: str | Path | None = None, *, device: str = "auto", lambda2: float | None = None
+    ) -> None:
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(device)
         self.model = load_model(model_path, device=self.device)
+        if lambda2 is not None:
+            self.model.config = dataclasses.replace(self.model.config, lambda2=float(lambda2))
 
     @torch.no_grad()
     def __call__(self, obs: Observations) -> Reconstruction:
@@ -132,10 +141,13 @@ _CACHE: dict[tuple[str, str], GTTNetReconstructor] = {}
 
 
 @register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
-def reconstruct_gttnet(obs: Observations, model: str | None = None) -> Reconstruction:
-    """GTT-Net with the bundled model, or the model file/run directory ``model``."""
-    key = (str(model), "auto")
+def reconstruct_gttnet(
+    obs: Observations, model: str | None = None, lambda2: float | None = None
+) -> Reconstruction:
+    """GTT-Net with the bundled model, or the model file/run directory ``model``; ``lambda2`` as in
+    :class:`GTTNetReconstructor`."""
+    key = (str(model), str(lambda2))
     if key not in _CACHE:
-        _CACHE[key] = GTTNetReconstructor(model)
+        _CACHE[key] = GTTNetReconstructor(model, lambda2=lambda2)
     rec = _CACHE[key](obs)
     return Reconstruction(points3d=rec.points3d, affinity=np.asarray(rec.affinity), info=rec.info)
