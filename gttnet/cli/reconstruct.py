@@ -78,9 +78,17 @@ def _report(loaded, rec) -> dict:
     "--model", "model_path", type=click.Path(dir_okay=False), default=None, help="Trained model (gttnet)."
 )
 @click.option("--seed", type=int, default=None, help="Seed of the image shuffle under --sequencing none.")
+@click.option(
+    "--subjects",
+    type=click.IntRange(1, 2),
+    default=1,
+    show_default=True,
+    help="Subjects per image with no identity across images (2: joints are two stacked skeletons; "
+    "their order is shuffled per image, then clustered by affinity).",
+)
 @friendly_errors
 def reconstruct_cmd(
-    input_path, fmt, sample, variant, method, sequencing, units, out_path, as_json, model_path, seed
+    input_path, fmt, sample, variant, method, sequencing, units, out_path, as_json, model_path, seed, subjects
 ):
     """Reconstruct the 3D joints of INPUT and recover the image order.
 
@@ -111,12 +119,19 @@ def reconstruct_cmd(
     if model_path is not None and method != "gttnet":
         raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
     try:
-        rec = reconstruct(loaded.observations, method, **options)
+        if subjects > 1:
+            from gttnet.apps.multi_subject import reconstruct_loaded_subjects
+
+            rec, summary = reconstruct_loaded_subjects(
+                loaded, method=method, n_subjects=subjects, seed=seed or 0, **options
+            )
+        else:
+            rec = reconstruct(loaded.observations, method, **options)
+            summary = _report(loaded, rec)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     if out_path is not None:
         write_reconstruction(rec, out_path, image_index=loaded.image_index, source=loaded.source)
-    summary = _report(loaded, rec)
     if as_json:
         click.echo(json.dumps(summary))
         return
