@@ -84,7 +84,9 @@ class CaptureSample:
             if got != shape:
                 raise ValueError(f"sample {self.name!r}: {key} must have shape {shape}, got {got}")
         if np.ndim(self.image_size) != 2 or np.shape(self.image_size)[1] != 2:
-            raise ValueError(f"sample {self.name!r}: image_size must have shape (V, 2), got {np.shape(self.image_size)}")
+            raise ValueError(
+                f"sample {self.name!r}: image_size must have shape (V, 2), got {np.shape(self.image_size)}"
+            )
 
     @property
     def n_images(self) -> int:
