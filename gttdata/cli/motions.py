@@ -41,7 +41,13 @@ def summarise_motion(motion: Motion) -> list[str]:
         f"extent: x {ext[0]:.0f} mm, y {ext[1]:.0f} mm, z {ext[2]:.0f} mm "
         f"(z from {lo[2] * 1000:.0f} to {hi[2] * 1000:.0f} mm)",
         f"standing height: {h:.2f} m ({h * 1000:.0f} mm, joints' vertical extent, 95th percentile)",
-    ]
+    ] + (
+        [
+            f"stature (rest pose incl. head-top and toe-tip end sites): {motion.provenance['rest_stature_m']:.2f} m"
+        ]
+        if "rest_stature_m" in motion.provenance
+        else []
+    )
 
 
 @click.group("motions")

@@ -57,6 +57,7 @@ class _Joint:
     offset: np.ndarray
     channels: list[str] = field(default_factory=list)
     first_column: int = 0
+    end_sites: list[np.ndarray] = field(default_factory=list)
 
 
 @dataclass
@@ -71,6 +72,7 @@ class BvhData:
         columns: First motion column of each joint, length J.
         values: Motion rows, shape ``(T, C)``; degrees for rotations, file units for positions.
         frame_time_s: Seconds per frame from the header.
+        end_sites: ``(parent joint index, OFFSET)`` of every End Site, file units.
     """
 
     names: list[str]
@@ -80,6 +82,7 @@ class BvhData:
     columns: list[int]
     values: np.ndarray
     frame_time_s: float
+    end_sites: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
 
 class _Tokens:
@@ -167,8 +170,7 @@ def _parse_joint(tk: _Tokens, joints: list[_Joint], parent: int, n_columns: int)
             tk.expect("Site")
             tk.expect("{")
             tk.expect("OFFSET")
-            for _ in range(3):
-                tk.number(f"End Site OFFSET of {name}")
+            joint.end_sites.append(np.array([tk.number(f"End Site OFFSET of {name}") for _ in range(3)]))
             tk.expect("}")
         else:
             raise MotionFormatError(f"{tk.path}: line {line}: expected 'JOINT', 'End' or '}}', found {tok!r}")
@@ -276,7 +278,25 @@ def parse_bvh(path: str | Path) -> BvhData:
         columns=[j.first_column for j in joints],
         values=values,
         frame_time_s=frame_time,
+        end_sites=[(i, off) for i, j in enumerate(joints) for off in j.end_sites],
     )
+
+
+def rest_stature(data: BvhData, *, up: int) -> float:
+    """Height of the rest (zero-rotation) pose from its lowest to its highest point, End Sites included.
+
+    The joints alone stop at the base of the skull and the ankles/toe joints; the End Sites reach the top
+    of the head and the toe tips, so this is the figure's stature in file units.
+
+    Args:
+        data: Parsed file.
+        up: Index of the file's up axis (1 for y-up, 2 for z-up).
+    """
+    rest = np.zeros_like(data.offsets)
+    for j, p in enumerate(data.parents):
+        rest[j] = data.offsets[j] + (rest[p] if p >= 0 else 0.0)
+    points = [rest] + [rest[p] + off for p, off in data.end_sites]
+    return float(np.ptp(np.vstack(points)[:, up]))
 
 
 def forward_kinematics(data: BvhData) -> np.ndarray:
@@ -427,5 +447,6 @@ def load_bvh(path: str | Path, *, scale: float | None = None, up_axis: str = "y"
             "up_axis": up_axis,
             "frame_time_s": data.frame_time_s,
             "cmu31": is_cmu,
+            "rest_stature_m": rest_stature(data, up=1 if up_axis == "y" else 2) * scale,
         },
     )
