@@ -108,38 +108,109 @@ def virtual_images(obs: Observations, *, n_subjects: int = 2) -> Observations:
     )
 
 
-def cluster_subjects(affinity: np.ndarray, n_images: int, *, cannot_link_weight: float = 1.0) -> np.ndarray:
+def _signed_modes(S: np.ndarray, pairs: np.ndarray, beta: float, d: int) -> np.ndarray:
+    """The ``d`` smallest generalised eigenvectors of ``(D_S - S) + beta (D_C + C)`` over ``D_S + beta D_C``."""
+    m = S.shape[0]
+    C = np.zeros((m, m))
+    C[pairs[:, 0], pairs[:, 1]] = C[pairs[:, 1], pairs[:, 0]] = beta
+    deg, cdeg = S.sum(axis=1), C.sum(axis=1)
+    L = np.diag(deg) - S + np.diag(cdeg) + C
+    d = max(1, min(d, m))
+    _, vec = scipy.linalg.eigh(L, np.diag(deg + cdeg + 1e-12), subset_by_index=[0, d - 1])
+    return vec
+
+
+def _paired_two_means(U0: np.ndarray, U1: np.ndarray, *, iters: int = 30) -> np.ndarray:
+    """2-means of the rows of ``U0`` and ``U1`` where row n of each must go to different clusters.
+
+    Returns:
+        Whether block 0 of each pair joins cluster 0, shape ``(n,)`` bool (best cost over inits, one per axis).
+    """
+    best, best_cost = np.ones(U0.shape[0], dtype=bool), np.inf
+    for axis in range(U0.shape[1]):
+        first = U0[:, axis] >= U1[:, axis]
+        for _ in range(iters):
+            a = np.where(first[:, None], U0, U1)
+            b = np.where(first[:, None], U1, U0)
+            mu0, mu1 = a.mean(axis=0), b.mean(axis=0)
+            keep = ((U0 - mu0) ** 2).sum(1) + ((U1 - mu1) ** 2).sum(1)
+            swap = ((U0 - mu1) ** 2).sum(1) + ((U1 - mu0) ** 2).sum(1)
+            new = keep <= swap
+            if np.array_equal(new, first):
+                break
+            first = new
+        cost = float(np.minimum(keep, swap).sum())
+        if cost < best_cost:
+            best, best_cost = first, cost
+    return best
+
+
+def cluster_subjects(
+    affinity: np.ndarray,
+    n_images: int,
+    *,
+    features: np.ndarray | None = None,
+    cannot_link_weight: float = 1.0,
+    n_modes: int = 6,
+) -> np.ndarray:
     """Step 3: two clusters of the virtual images, an image's two virtual images always apart.
 
-    Minimises ``sum_ij A_ij (x_i - x_j)^2 + beta * sum_n (x_n0 + x_n1)^2`` relaxed to the smallest
-    generalised eigenvector of the signed Laplacian ``L = (D_A - A) + beta (D_C + C)`` (``C`` links each
-    image's two virtual images), normalised by ``D_A + beta D_C``. With affinity only inside subjects the
-    minimum is 0 at the subject indicator. Each image's block with the larger coordinate goes to cluster 0.
+    In each connected piece of the graph (affinity edges plus one cannot-link per image) the images are
+    embedded by the ``n_modes`` smallest generalised eigenvectors of the signed Laplacian
+    ``(D_A - A) + beta (D_C + C)`` over ``D_A + beta D_C`` (the quadratic form
+    ``sum_ij A_ij (x_i - x_j)^2 + beta * sum_n (x_n0 + x_n1)^2``, 0 at the subject indicator when the
+    affinity stays inside subjects). Slow modes along each subject's own trajectory are cheap too, so
+    the indicator is found by a 2-means in that embedding with each image's two blocks kept apart. Pieces the affinity does not connect (e.g. images in which a subject
+    is unseen) are aligned to the largest piece by the nearest side centroid of ``features``.
 
     Args:
         affinity: Affinity over the ``2N`` virtual images (image ``n`` block ``k`` at ``2n + k``).
         n_images: N.
+        features: Per virtual image position, e.g. the reconstructed centroid, shape ``(2N, D)``.
         cannot_link_weight: beta relative to the mean affinity degree.
+        n_modes: Embedding dimension.
 
     Returns:
         Cluster of each block, shape ``(N, 2)``, each row a permutation of ``(0, 1)``.
     """
+    from scipy.sparse.csgraph import connected_components
+
     A = np.asarray(affinity, dtype=np.float64)
     m = 2 * n_images
     if A.shape != (m, m):
         raise ValueError(f"affinity must have shape ({m}, {m}), got {A.shape}")
     S = 0.5 * (np.abs(A) + np.abs(A).T)
     np.fill_diagonal(S, 0.0)
-    deg = S.sum(axis=1)
-    beta = cannot_link_weight * max(float(deg.mean()), 1e-12)
-    C = np.zeros((m, m))
-    i0, i1 = 2 * np.arange(n_images), 2 * np.arange(n_images) + 1
-    C[i0, i1] = C[i1, i0] = beta
-    L = np.diag(deg) - S + np.diag(C.sum(axis=1)) + C
-    D = np.diag(deg + C.sum(axis=1) + 1e-12)
-    _, vec = scipy.linalg.eigh(L, D, subset_by_index=[0, 0])
-    x = vec[:, 0].reshape(n_images, 2)
-    first = x[:, 0] >= x[:, 1]
+    beta = cannot_link_weight * max(float(S.sum(axis=1).mean()), 1e-12)
+    G = S > 0
+    G[2 * np.arange(n_images), 2 * np.arange(n_images) + 1] = True
+    n_comp, comp = connected_components(G, directed=False)
+    first = np.ones(n_images, dtype=bool)  # block 0 of image n on side 0
+    pieces = []
+    for c in range(n_comp):
+        nodes = np.flatnonzero(comp == c)
+        imgs = np.unique(nodes // 2)
+        local = {v: i for i, v in enumerate(nodes)}
+        pairs = np.array([[local[2 * n], local[2 * n + 1]] for n in imgs])
+        sub = S[np.ix_(nodes, nodes)]
+        if sub.any():
+            U = _signed_modes(sub, pairs, beta, n_modes)
+            first[imgs] = _paired_two_means(U[pairs[:, 0]], U[pairs[:, 1]])
+        pieces.append(imgs)
+    if features is not None and len(pieces) > 1:
+        F = np.nan_to_num(np.asarray(features, dtype=np.float64).reshape(n_images, 2, -1))
+        side = lambda imgs: np.where(first[imgs, None], F[imgs, 0], F[imgs, 1])  # noqa: E731
+        other = lambda imgs: np.where(first[imgs, None], F[imgs, 1], F[imgs, 0])  # noqa: E731
+        ref = max(pieces, key=len)
+        c0, c1 = side(ref).mean(axis=0), other(ref).mean(axis=0)
+        for imgs in pieces:
+            if imgs is ref:
+                continue
+            s0, s1 = side(imgs).mean(axis=0), other(imgs).mean(axis=0)
+            keep = np.linalg.norm(s0 - c0) + np.linalg.norm(s1 - c1)
+            flip = np.linalg.norm(s0 - c1) + np.linalg.norm(s1 - c0)
+            if flip < keep:
+                first[imgs] = ~first[imgs]
     return np.stack([np.where(first, 0, 1), np.where(first, 1, 0)], axis=1)
 
 
@@ -185,7 +256,7 @@ def reconstruct_subjects(
         raise ValueError(f"method {method!r} returns no affinity; use dloe, pseudo or gttnet")
     A = vrec.affinity[np.ix_(inv, inv)]
     X = vrec.points3d[inv].reshape(n, 2, p, 3)
-    labels = cluster_subjects(A, n)
+    labels = cluster_subjects(A, n, features=_centroids(X, vobs.visible[inv].reshape(n, 2, p)))
     merged = np.empty_like(X)
     rows = np.arange(n)
     for k in range(2):
@@ -199,6 +270,12 @@ def reconstruct_subjects(
     seconds = time.perf_counter() - t0
     log.info("two subjects: %d images in %.2f s (%s)", n, seconds, method)
     return MultiSubjectResult(out, labels, merged, aff, A, seconds)
+
+
+def _centroids(X: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """Mean of the observed joints of each virtual shape (all joints when none is seen), ``(N*2, 3)``."""
+    w = np.where(visible.any(axis=-1, keepdims=True), visible, True).astype(np.float64)
+    return ((X * w[..., None]).sum(axis=2) / w.sum(axis=2)[..., None]).reshape(-1, 3)
 
 
 def _take_images(obs: Observations, idx: np.ndarray) -> Observations:
