@@ -196,14 +196,20 @@ def _row(job: Job, seq: str, name: str, n: int, **fields) -> dict:
         "note": "",
     }
     row.update(fields)
+    row["note"] = " ".join(str(row["note"]).split())  # one line per row: resume counts lines
     return row
 
 
-def run_job(recipe: EvalRecipe, job: Job) -> list[dict]:
-    """Run every sequencing condition and method of a job.
+def run_job(recipe: EvalRecipe, job: Job, todo: frozenset[tuple[str, str]] | None = None) -> list[dict]:
+    """Run every sequencing condition and method of a job (or only the ``todo`` pairs).
 
     A method that lacks its sequencing or its model, or that fails, gives a row with status ``skipped``
     (or ``error``) and the reason in ``note``; it never stops the run.
+
+    Args:
+        recipe: The recipe.
+        job: The job.
+        todo: ``(sequencing, method name)`` pairs to run; None = all.
 
     Returns:
         One row per (sequencing, method), keys :data:`CSV_FIELDS`.
@@ -213,6 +219,8 @@ def run_job(recipe: EvalRecipe, job: Job) -> list[dict]:
     for seq in recipe.sequencing:
         obs, gt = make_view(sample, seq, seed=recipe.seed)
         for entry in recipe.methods:
+            if todo is not None and (seq, entry.name) not in todo:
+                continue
             try:
                 rec = run_method(obs, entry)
             except (SequencingError, ModelError) as exc:
@@ -247,12 +255,24 @@ def read_rows(path: str | Path) -> list[dict]:
         return [r for r in csv.DictReader(f) if None not in r and None not in r.values()]
 
 
-def _complete_rows(rows: list[dict], expected: set[tuple[str, str]]) -> tuple[list[dict], set[str]]:
-    by_job: dict[str, list[dict]] = {}
+def _done_pairs(rows: list[dict]) -> dict[str, set[tuple[str, str]]]:
+    done: dict[str, set[tuple[str, str]]] = {}
     for r in rows:
-        by_job.setdefault(r["job_id"], []).append(r)
-    done = {j for j, rs in by_job.items() if {(r["sequencing"], r["method"]) for r in rs} >= expected}
-    return [r for r in rows if r["job_id"] in done], done
+        done.setdefault(r["job_id"], set()).add((r["sequencing"], r["method"]))
+    return done
+
+
+def _clean_csv(path: Path) -> list[dict]:
+    """Valid rows of an existing CSV; rewrites it when a kill left a torn or malformed last row."""
+    if not path.is_file():
+        return []
+    rows = read_rows(path)
+    text = path.read_text()
+    if text and (not text.endswith("\n") or text.count("\n") != len(rows) + 1):
+        log.info("%s: dropping a torn row left by an interrupted run", path)
+        path.unlink()
+        _append(path, rows)
+    return rows
 
 
 def _append(path: Path, rows: Iterable[dict]) -> None:
@@ -275,21 +295,23 @@ def _worker_init() -> None:
         pass
 
 
-def _run_jobs(recipe: EvalRecipe, jobs: list[Job], csv_path: Path, workers: int, progress: bool) -> None:
+def _run_jobs(
+    recipe: EvalRecipe, jobs: list[tuple[Job, frozenset]], csv_path: Path, workers: int, progress: bool
+) -> None:
     from tqdm import tqdm
 
     bar = tqdm(total=len(jobs), unit="job", desc=recipe.name, disable=not progress, dynamic_ncols=True)
     try:
         if workers <= 1 or len(jobs) <= 1:
-            for job in jobs:
-                _append(csv_path, run_job(recipe, job))
+            for job, todo in jobs:
+                _append(csv_path, run_job(recipe, job, todo))
                 bar.update()
             return
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-            futures = [pool.submit(run_job, recipe, job) for job in jobs]
+            futures = [pool.submit(run_job, recipe, job, todo) for job, todo in jobs]
             for fut in as_completed(futures):
                 _append(csv_path, fut.result())
                 bar.update()
@@ -310,8 +332,9 @@ def evaluate(
     Args:
         recipe: The validated recipe.
         workers: Worker processes (default: ``recipe.workers``).
-        resume: Keep the finished jobs of an existing ``errors.csv`` and run only the others; when
-            False an existing ``errors.csv`` is an error.
+        resume: Keep the rows of an existing ``errors.csv`` and run only the missing (job, sequencing,
+            method) cells, so adding a method to a finished run runs just that method; when False an
+            existing ``errors.csv`` is an error.
         progress: Show a tqdm bar.
         plots: Write the PNG plots.
 
@@ -328,14 +351,10 @@ def evaluate(
         raise EvalRecipeError(f"{csv_path} exists; resume it or choose another output_dir")
     (out / "recipe.json").write_text(json.dumps(dataclasses.asdict(recipe), indent=2) + "\n")
     jobs = plan_jobs(recipe)
-    expected = {(s, m.name) for s in recipe.sequencing for m in recipe.methods}
-    old = read_rows(csv_path)
-    kept, done = _complete_rows(old, expected)
-    if len(kept) != len(old):
-        log.info("dropping %d rows of unfinished jobs from %s", len(old) - len(kept), csv_path)
-        csv_path.unlink()
-        _append(csv_path, kept)
-    pending = [j for j in jobs if j.job_id not in done]
+    expected = frozenset((s, m.name) for s in recipe.sequencing for m in recipe.methods)
+    done = _done_pairs(_clean_csv(csv_path))
+    pending = [(j, expected - done.get(j.job_id, set())) for j in jobs]
+    pending = [(j, todo) for j, todo in pending if todo]
     log.info(
         "%s: %d jobs, %d done, %d to run", recipe.name, len(jobs), len(jobs) - len(pending), len(pending)
     )

@@ -151,14 +151,21 @@ def test_resume_skips_done_jobs(tmp_path, monkeypatch):
     assert len(read_rows(csv_path)) == 2
     calls = []
     real = run_mod.run_job
-    monkeypatch.setattr(run_mod, "run_job", lambda r, j: calls.append(j.job_id) or real(r, j))
+    monkeypatch.setattr(
+        run_mod, "run_job", lambda r, j, todo=None: calls.append((j.job_id, sorted(todo))) or real(r, j, todo)
+    )
     evaluate(recipe, progress=False, plots=False)
     assert calls == []
     lines = csv_path.read_text().splitlines()
     csv_path.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:10])  # a kill mid-row of the last job
     evaluate(recipe, progress=False, plots=False)
-    assert calls == [lines[-1].split(",")[0]]
-    assert len(read_rows(csv_path)) == 2
+    assert calls == [(lines[-1].split(",")[0], [("full", "pseudo")])]
+    assert len(read_rows(csv_path)) == 2 and csv_path.read_text().count("\n") == 3
+    calls.clear()
+    wider = parse_eval_recipe(_tiny(tmp_path, methods=["pseudo", "hpf"], sequencing=["full"]))
+    evaluate(wider, progress=False, plots=False)  # a method added to a finished run: only it runs
+    assert [todo for _, todo in calls] == [[("full", "hpf")]] * 2
+    assert len(read_rows(csv_path)) == 4
     with pytest.raises(EvalRecipeError, match="exists"):
         evaluate(recipe, progress=False, resume=False)
 
