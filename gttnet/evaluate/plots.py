@@ -23,8 +23,9 @@ def _pyplot():
 def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
     """One figure per swept condition: MPJPE vs value, a line per method, a panel per sequencing condition.
 
-    Error bars are ``recipe.error_bars``: ``ci95`` (95% t-interval of the mean over sequences) or
-    ``std`` (sample standard deviation); the figure title says which.
+    Points are the mean over sequences with ``recipe.error_bars`` (``ci95``: 95% t-interval of the mean;
+    ``std``: sample standard deviation), or with ``recipe.plot_statistic == "median"`` the median with
+    the interquartile range; the figure title says which.
 
     Args:
         rows: Rows of ``errors.csv``.
@@ -38,7 +39,9 @@ def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
     out = Path(out_dir)
     labels = {s.name: s.label or s.variable for s in recipe.sweeps}
     methods = [m.name for m in recipe.methods]
+    median = recipe.plot_statistic == "median"
     bars = "95% CI of the mean" if recipe.error_bars == "ci95" else "±1 std"
+    bars = "median, bars: interquartile range" if median else f"mean, bars: {bars}"
     paths = []
     for cond in dict.fromkeys(r["condition"] for r in rows):
         crow = [r for r in rows if r["condition"] == cond and r["status"] == "ok" and r["mpjpe_mm"]]
@@ -51,8 +54,12 @@ def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
                     continue
                 xs = sorted({float(r["value"]) for r in pts})
                 vals = [np.array([float(r["mpjpe_mm"]) for r in pts if float(r["value"]) == x]) for x in xs]
-                ys = [v.mean() for v in vals]
-                es = [error_bar(v, recipe.error_bars) for v in vals]
+                if median:
+                    q = np.array([np.percentile(v, [25, 50, 75]) for v in vals])
+                    ys, es = q[:, 1], np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]])
+                else:
+                    ys = [v.mean() for v in vals]
+                    es = [error_bar(v, recipe.error_bars) for v in vals]
                 ax.errorbar(xs, ys, yerr=es, marker="o", ms=4, capsize=3, label=m, color=f"C{k}")
             ax.set_title(f"sequencing: {seq}")
             ax.set_xlabel(labels.get(cond, cond))
@@ -66,7 +73,7 @@ def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
                     names.append(n)
         if handles:
             fig.legend(handles, names, loc="upper right", fontsize=8)
-        fig.suptitle(f"{recipe.name}: {cond} (error bars: {bars})", fontsize=10)
+        fig.suptitle(f"{recipe.name}: {cond} ({bars})", fontsize=10)
         fig.tight_layout(rect=(0, 0, 0.9, 0.95))
         p = out / f"sweep_{cond}.png"
         fig.savefig(p, dpi=110)

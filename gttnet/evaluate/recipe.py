@@ -153,7 +153,9 @@ class EvalRecipe:
         sequencing: Sequencing conditions to run each method under.
         methods: Method entries (a bare string is a method name).
         workers: Worker processes over (condition, sample) jobs.
-        error_bars: ``ci95`` (95% t-interval of the mean) or ``std`` in the plots.
+        error_bars: ``ci95`` (95% t-interval of the mean) or ``std`` in the plots of the mean.
+        plot_statistic: ``mean`` (bars: ``error_bars``) or ``median`` (bars: interquartile range), robust
+            to a sequence whose subject leaves every camera's view.
         seed: Seed of the image shuffle under sequencing ``none`` (None = from the sample name).
         runtime: Optional runtime study run after the sweeps.
     """
@@ -166,6 +168,7 @@ class EvalRecipe:
     methods: list[MethodEntry] = field(default_factory=list)
     workers: int = 1
     error_bars: str = "ci95"
+    plot_statistic: str = "mean"
     seed: int | None = None
     runtime: RuntimeSpec | None = None
 
@@ -180,6 +183,8 @@ class EvalRecipe:
             raise ValueError(f"method names must be unique, got {names}")
         if self.error_bars not in ("ci95", "std"):
             raise ValueError(f"error_bars must be ci95 or std, got {self.error_bars!r}")
+        if self.plot_statistic not in ("mean", "median"):
+            raise ValueError(f"plot_statistic must be mean or median, got {self.plot_statistic!r}")
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
         if self.data.dataset is not None and any(v.dataset is None for s in self.sweeps for v in s.values):

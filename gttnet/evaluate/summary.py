@@ -93,25 +93,30 @@ def _fmt(x: float, digits: int = 1) -> str:
     return "–" if not np.isfinite(x) else f"{x:.{digits}f}"
 
 
-def summary_markdown(rows: list[dict], *, title: str = "Evaluation", error_bars: str = "ci95") -> str:
+def summary_markdown(
+    rows: list[dict], *, title: str = "Evaluation", error_bars: str = "ci95", statistic: str = "mean"
+) -> str:
     """Markdown tables: per condition, mean / median MPJPE (mm) and mean Kendall tau per method and value.
 
     Args:
         rows: Rows of ``errors.csv``.
         title: Heading.
         error_bars: What the plots' error bars show (stated in the text).
+        statistic: What the plots show, ``mean`` or ``median``.
 
     Returns:
         The Markdown text.
     """
     st = group_stats(rows)
     bars = "95% t-interval of the mean" if error_bars == "ci95" else "± one sample standard deviation"
+    if statistic == "median":
+        bars = "median with the interquartile range"
     lines = [
         f"# {title}",
         "",
         "Cells: mean / median MPJPE over sequences in mm (all images and joints, missing ones included), "
         "then (mean Kendall tau of the recovered image order, up to reversal); `skip` = the method lacks "
-        f"its sequencing or model (see Notes). Plot error bars: {bars}.",
+        f"its sequencing or model (see Notes). Plots: {bars}.",
         "",
     ]
     for cond in dict.fromkeys(s.condition for s in st):
@@ -152,5 +157,11 @@ def _status(rows: list[dict], g: GroupStats) -> str:
 def write_summary(rows: list[dict], recipe, path: str | Path) -> Path:
     """Write :func:`summary_markdown` of ``rows`` for a recipe to ``path``."""
     p = Path(path)
-    p.write_text(summary_markdown(rows, title=f"Evaluation: {recipe.name}", error_bars=recipe.error_bars))
+    text = summary_markdown(
+        rows,
+        title=f"Evaluation: {recipe.name}",
+        error_bars=recipe.error_bars,
+        statistic=recipe.plot_statistic,
+    )
+    p.write_text(text)
     return p

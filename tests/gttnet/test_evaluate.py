@@ -201,3 +201,17 @@ def test_runtime_study_tiny(tmp_path):
     assert (tmp_path / "rt" / "runtime.png").is_file()
     assert "speed-up" not in res.markdown  # no DLOE column, no ratio
     assert (tmp_path / "rt" / "runtime.csv").read_text().startswith("n_images,pseudo,gttnet")
+
+
+def test_median_plots(tiny_run, tmp_path):
+    from gttnet.evaluate.plots import plot_sweeps
+    from gttnet.evaluate.summary import summary_markdown
+
+    recipe, out = tiny_run
+    rows = read_rows(out / "errors.csv")
+    med = parse_eval_recipe(_tiny(tmp_path, plot_statistic="median"))
+    (path,) = plot_sweeps(rows, med, tmp_path)
+    assert path.name == "sweep_noise.png" and path.stat().st_size > 1000
+    assert "interquartile" in summary_markdown(rows, statistic="median")
+    with pytest.raises(EvalRecipeError, match="plot_statistic"):
+        parse_eval_recipe(_tiny(tmp_path, plot_statistic="mode"))
