@@ -122,7 +122,13 @@ def summary_markdown(
     for cond in dict.fromkeys(s.condition for s in st):
         cs = [s for s in st if s.condition == cond]
         values = sorted({s.value for s in cs})
-        lines += [f"## {cond}", "", "| sequencing | method | " + " | ".join(f"{v:g}" for v in values) + " |"]
+        lines += [
+            f"## {cond}",
+            "",
+            "| sequencing | method | "
+            + " | ".join("all" if cond == "base" else f"{v:g}" for v in values)
+            + " |",
+        ]
         lines.append("|---|---|" + "---|" * len(values))
         for seq in dict.fromkeys(s.sequencing for s in cs):
             for method in dict.fromkeys(s.method for s in cs if s.sequencing == seq):
