@@ -235,7 +235,9 @@ class CameraRig:
                 raise RigError(f"{source}: [{key}] has a malformed field: {exc}") from exc
             if len(size) != 2:
                 raise RigError(f"{source}: [{key}] field 'size' must be [width, height], found {tab['size']}")
-            cams.append(Camera(K=K, cam_from_world=T, image_size=size, name=str(tab.get("name", key)), dist=dist))
+            cams.append(
+                Camera(K=K, cam_from_world=T, image_size=size, name=str(tab.get("name", key)), dist=dist)
+            )
         if not cams:
             raise RigError(f"{source}: no camera tables found")
         return cls(tuple(cams))
