@@ -29,6 +29,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--model", default=None, help="Trained GTT-Net model (default: bundled).")
     ap.add_argument("--threads", type=int, default=1, help="torch threads.")
+    ap.add_argument("--device", default="cpu", help="Device of GTT-Net (cpu or cuda); DLOE runs on the CPU.")
     ap.add_argument("--out", default="runs/eval/runtime")
     args = ap.parse_args()
 
@@ -44,6 +45,7 @@ def main() -> None:
         generate=args.recipe,
         repeats=args.repeats,
         model=args.model,
+        device=args.device,
     )
     print(run_runtime(spec, args.out).markdown)
 

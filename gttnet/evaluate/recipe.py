@@ -130,6 +130,7 @@ class RuntimeSpec:
         repeats: Timed runs per length (the minimum is reported).
         sequencing: Sequencing condition of the timed runs.
         model: Trained GTT-Net model path; None = bundled, or untrained when none is installed.
+        device: Device of the GTT-Net timing (``"cpu"`` or ``"cuda"``); the classical methods run on the CPU.
     """
 
     lengths: list[int] = field(default_factory=lambda: [100, 200, 300, 400, 500, 600])
@@ -139,6 +140,7 @@ class RuntimeSpec:
     repeats: int = 1
     sequencing: str = "none"
     model: str | None = None
+    device: str = "cpu"
 
 
 @dataclass

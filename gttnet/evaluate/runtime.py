@@ -38,7 +38,7 @@ class RuntimeResult:
     markdown: str = ""
 
 
-def gttnet_timer(model: str | None = None):
+def gttnet_timer(model: str | None = None, device: str = "cpu"):
     """A callable ``obs -> points3d`` timing GTT-Net inference, and a note on which network it runs.
 
     Uses the trained model when one loads; otherwise an untrained ``gttnet_base`` from
@@ -55,18 +55,18 @@ def gttnet_timer(model: str | None = None):
     try:
         from gttnet.model.inference import load_model
 
-        net = load_model(model)
-        note = f"trained model {model or 'bundled'}"
+        net = load_model(model, device=device)
+        note = f"trained model {model or 'bundled'} on {device}"
     except ModelError as exc:
         from gttnet.model.network import build_model
 
-        net = build_model("gttnet_base").eval()
+        net = build_model("gttnet_base").eval().to(device)
         note = f"untrained gttnet_base ({exc}); timing does not depend on the weights"
 
     @torch.no_grad()
     def run(obs) -> np.ndarray:
-        seq = prepare_inputs(obs, k=net.config.k)
-        return net([seq], solve=True)[0].x_est.numpy()
+        seq = prepare_inputs(obs, k=net.config.k).to(device)
+        return net([seq], solve=True)[0].x_est.cpu().numpy()  # .cpu() waits for the device
 
     return run, note
 
@@ -127,7 +127,7 @@ def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = Fals
     runners, notes = {}, {}
     for m in spec.methods:
         if m == "gttnet":
-            runners[m], notes[m] = gttnet_timer(spec.model)
+            runners[m], notes[m] = gttnet_timer(spec.model, spec.device)
         else:
             runners[m] = lambda obs, m=m: reconstruct(obs, m).points3d
             notes[m] = f"gttnet.baselines.reconstruct(obs, {m!r})"
