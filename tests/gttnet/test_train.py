@@ -19,7 +19,10 @@ from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_reci
 from gttnet.train.stages import Stage
 
 REPO = Path(__file__).resolve().parents[2]
-RECIPES = sorted((REPO / "recipes" / "gttnet").glob("*.yaml"))
+ALL_YAML = sorted((REPO / "recipes" / "gttnet").glob("*.yaml"))
+# Training recipes open with the command that runs them; evaluation recipes (eval_*, ablation_*) open
+# with `# gttnet evaluate` and are validated in tests/gttnet/test_evaluate.py.
+RECIPES = [p for p in ALL_YAML if p.read_text().startswith(("# gttnet train ", "# torchrun "))]
 
 
 def _recipe(tmp_path: Path, *, stages=None, **overrides) -> dict:
@@ -73,6 +76,11 @@ def test_every_recipe_runs_one_step_per_stage(path, tmp_path, monkeypatch):
     res = train(load_train_recipe(path, overrides), out=tmp_path / "run", progress=False)
     assert res.finished and res.state.global_step == n
     assert all(np.isfinite(h["loss"]) for h in res.state.history if "loss" in h)
+
+
+def test_every_yaml_is_a_train_or_evaluate_recipe():
+    for p in ALL_YAML:
+        assert p in RECIPES or p.read_text().startswith("# gttnet evaluate "), p.name
 
 
 def test_recipe_set_is_complete():
