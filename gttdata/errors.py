@@ -9,6 +9,8 @@ __all__ = [
     "RigError",
     "ShardFormatError",
     "ManifestError",
+    "PreviewDependencyError",
+    "RendererUnavailableError",
 ]
 
 
@@ -34,3 +36,11 @@ class ShardFormatError(GttDataError):
 
 class ManifestError(GttDataError):
     """A manifest is missing, malformed, or disagrees with the shards on disk."""
+
+
+class PreviewDependencyError(GttDataError):
+    """An optional preview dependency (matplotlib, trimesh, pyrender) is not installed."""
+
+
+class RendererUnavailableError(GttDataError):
+    """No offscreen OpenGL backend (EGL or OSMesa) can create a rendering context."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from gttdata.errors import GttDataError
 
-__all__ = ["GttNetError", "ImportFormatError", "SequencingError", "ModelError"]
+__all__ = ["GttNetError", "ImportFormatError", "SequencingError", "ModelError", "SingularStructureError"]
 
 
 class GttNetError(GttDataError):
@@ -21,3 +21,7 @@ class SequencingError(GttNetError):
 
 class ModelError(GttNetError):
     """A model file is missing or incompatible."""
+
+
+class SingularStructureError(GttNetError):
+    """The X-step has no unique solution (a joint unobserved in a connected part of the graph)."""

@@ -10,7 +10,7 @@ import os
 import sys
 from types import ModuleType
 
-from gttdata.errors import GttDataError
+from gttdata.errors import PreviewDependencyError, RendererUnavailableError
 
 __all__ = [
     "PreviewDependencyError",
@@ -23,14 +23,6 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 _INSTALL_HINT = "install the preview extra: pip install 'gtt[preview]'"
-
-
-class PreviewDependencyError(GttDataError):
-    """An optional preview dependency (matplotlib, trimesh, pyrender) is not installed."""
-
-
-class RendererUnavailableError(GttDataError):
-    """No offscreen OpenGL backend (EGL or OSMesa) can create a rendering context."""
 
 
 # The process-wide renderer: (pyrender module, OffscreenRenderer, backend name), or the error that

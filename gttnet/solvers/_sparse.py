@@ -9,7 +9,8 @@ import scipy.sparse as sp
 import torch
 from scipy.sparse.linalg import splu
 
-from gttnet.solvers._system import SingularStructureError, StructureSystem
+from gttnet.errors import SingularStructureError
+from gttnet.solvers._system import StructureSystem
 
 __all__ = ["solve_sparse"]
 

@@ -8,15 +8,11 @@ from dataclasses import dataclass
 
 import torch
 
-from gttnet.errors import GttNetError
+from gttnet.errors import SingularStructureError
 
 __all__ = ["SingularStructureError", "StructureSystem", "build_system", "solve_dense"]
 
 log = logging.getLogger(__name__)
-
-
-class SingularStructureError(GttNetError):
-    """The X-step has no unique solution (a joint unobserved in a connected part of the graph)."""
 
 
 @dataclass

@@ -9,8 +9,9 @@ import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from gttnet.errors import SingularStructureError
 from gttnet.solvers._sparse import solve_sparse
-from gttnet.solvers._system import SingularStructureError, build_system, solve_dense
+from gttnet.solvers._system import build_system, solve_dense
 
 __all__ = [
     "DLOESolver",
