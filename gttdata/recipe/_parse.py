@@ -213,19 +213,28 @@ def to_plain(obj: object) -> object:
     return obj
 
 
-def apply_overrides(data: dict, overrides: Sequence[str], source: str) -> dict:
-    """Apply ``key.sub=value`` overrides (values parsed as YAML scalars) to a raw recipe mapping.
+def apply_overrides(
+    data: dict, overrides: Sequence[str], source: str, *, error: type[Exception] = RecipeError
+) -> dict:
+    """Apply ``key.sub=value`` overrides (values parsed as YAML scalars) to a raw recipe mapping in place.
 
-    A list is indexed by position (``splits.0``) or by an element's ``name`` (``splits.train``).
+    The one override syntax of every gtt recipe (generate, train, evaluate). A list is indexed by
+    position (``splits.0``) or by an element's ``name`` (``splits.train``).
+
+    Args:
+        data: Raw recipe mapping (changed in place and returned).
+        overrides: E.g. ``["capture.sigma_px=4", "stages.0.steps=10", "methods=[pseudo,dloe]"]``.
+        source: Recipe name or path, first word of every error.
+        error: Exception type raised for a malformed override (each caller's recipe error).
     """
     for ov in overrides:
         key, sep, text = ov.partition("=")
         if not sep or not key.strip():
-            raise RecipeError(f"{source}: override {ov!r}: expected key.sub=value")
+            raise error(f"{source}: override {ov!r}: expected key.sub=value")
         try:
             value = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise RecipeError(f"{source}: override {key}: value {text!r} is not valid YAML ({exc})") from exc
+            raise error(f"{source}: override {key}: value {text!r} is not valid YAML ({exc})") from exc
         node: object = data
         parts = key.strip().split(".")
         for i, part in enumerate(parts):
@@ -238,9 +247,7 @@ def apply_overrides(data: dict, overrides: Sequence[str], source: str) -> dict:
                 if idx is None and part.isdigit() and int(part) < len(node):
                     idx = int(part)
                 if idx is None:
-                    raise RecipeError(
-                        f"{source}: override {where}: no list element named or numbered {part!r}"
-                    )
+                    raise error(f"{source}: override {where}: no list element named or numbered {part!r}")
                 if last:
                     node[idx] = value
                 else:
@@ -253,7 +260,5 @@ def apply_overrides(data: dict, overrides: Sequence[str], source: str) -> dict:
                         node[part] = {}
                     node = node[part]
             else:
-                raise RecipeError(
-                    f"{source}: override {where}: cannot set a key inside a {type(node).__name__}"
-                )
+                raise error(f"{source}: override {where}: cannot set a key inside a {type(node).__name__}")
     return data

@@ -13,6 +13,7 @@ from pathlib import Path
 import yaml
 
 from gttdata.capture.views import SEQUENCING
+from gttdata.recipe import apply_overrides
 from gttnet.errors import GttNetError
 
 __all__ = [
@@ -281,42 +282,6 @@ def _build(cls: type, data: object, key: str) -> object:
         raise EvalRecipeError(f"{key or 'recipe'}: {exc}") from exc
 
 
-def apply_overrides(data: dict, overrides: Sequence[str]) -> dict:
-    """Apply ``key.sub=value`` overrides (values parsed as YAML) to a nested mapping in place.
-
-    Args:
-        data: Raw recipe mapping.
-        overrides: E.g. ``["data.n_sequences=2", "methods=[pseudo,dloe]", "sweeps.0.values=[0,4]"]``.
-
-    Returns:
-        ``data``.
-    """
-    for item in overrides:
-        if "=" not in item:
-            raise EvalRecipeError(f"override {item!r}: expected key.sub=value, e.g. data.n_sequences=3")
-        path, raw = item.split("=", 1)
-        value = yaml.safe_load(raw) if raw.strip() else None
-        parts = path.strip().split(".")
-        node: object = data
-        for i, p in enumerate(parts):
-            last = i == len(parts) - 1
-            if isinstance(node, list):
-                if not p.isdigit() or int(p) >= len(node):
-                    raise EvalRecipeError(f"override {path}: {p!r} is not an index of a list of {len(node)}")
-                if last:
-                    node[int(p)] = value
-                else:
-                    node = node[int(p)]
-            elif isinstance(node, dict):
-                if last:
-                    node[p] = value
-                else:
-                    node = node.setdefault(p, {})
-            else:
-                raise EvalRecipeError(f"override {path}: {'.'.join(parts[:i])} is not a mapping or list")
-    return data
-
-
 def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
     """Validate a raw recipe mapping (``sweeps: paper`` expands to :data:`PAPER_SWEEPS`).
 
@@ -328,7 +293,7 @@ def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
         if data.get("sweeps") == "paper":
             data["sweeps"] = copy.deepcopy(PAPER_SWEEPS)
         if step == 0:
-            data = apply_overrides(data, overrides)
+            data = apply_overrides(data, overrides, "evaluation recipe", error=EvalRecipeError)
     return _build(EvalRecipe, data, "")
 
 

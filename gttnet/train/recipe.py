@@ -11,6 +11,7 @@ from pathlib import Path
 
 import yaml
 
+from gttdata.recipe import apply_overrides
 from gttnet.errors import GttNetError
 from gttnet.train.stages import Stage
 
@@ -237,31 +238,6 @@ def _build(cls: type, data: object, key: str) -> object:
         raise RecipeError(f"{key or 'recipe'}: {exc}") from exc
 
 
-def _apply_override(data: dict, item: str) -> None:
-    if "=" not in item:
-        raise RecipeError(f"override {item!r}: expected key.sub=value, e.g. stages.0.steps=10")
-    path, raw = item.split("=", 1)
-    value = yaml.safe_load(raw) if raw.strip() else None
-    parts = path.strip().split(".")
-    node: object = data
-    for i, p in enumerate(parts):
-        last = i == len(parts) - 1
-        if isinstance(node, list):
-            if not p.isdigit() or int(p) >= len(node):
-                raise RecipeError(f"override {path}: {p!r} is not an index of a list of {len(node)}")
-            if last:
-                node[int(p)] = value
-            else:
-                node = node[int(p)]
-        elif isinstance(node, dict):
-            if last:
-                node[p] = value
-            else:
-                node = node.setdefault(p, {})
-        else:
-            raise RecipeError(f"override {path}: {'.'.join(parts[:i])} is not a mapping or list")
-
-
 def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe:
     """Build a :class:`TrainRecipe` from a plain mapping and ``key.sub=value`` overrides.
 
@@ -269,8 +245,7 @@ def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe
         RecipeError: On an unknown key, a wrong type or an invalid value (one line naming the key).
     """
     data = yaml.safe_load(yaml.safe_dump(data)) or {}
-    for item in overrides:
-        _apply_override(data, item)
+    apply_overrides(data, overrides, "train recipe", error=RecipeError)
     return typing.cast(TrainRecipe, _build(TrainRecipe, data, ""))
 
 

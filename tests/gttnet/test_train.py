@@ -96,7 +96,7 @@ def test_recipe_errors_are_one_line(tmp_path):
         parse_train_recipe(base, ["train.batch_size=two"])
     with pytest.raises(RecipeError, match="unknown loss 'chamfer'"):
         parse_train_recipe(base, ["stages.0.losses.chamfer=1"])
-    with pytest.raises(RecipeError, match="not an index"):
+    with pytest.raises(RecipeError, match="override stages.7: no list element named or numbered '7'"):
         parse_train_recipe(base, ["stages.7.steps=1"])
     with pytest.raises(RecipeError, match="key.sub=value"):
         parse_train_recipe(base, ["stages"])
