@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gttdata.augment import bone_scale, get_augmentation, mirror
+from gttdata.augment import bone_scale, decorrelate, get_augmentation, mirror
 from gttdata.cameras import CameraRig, ring_rig
 from gttdata.capture.sample import CaptureSample
 from gttdata.capture.simulate import CaptureParams, merge_subjects, simulate_capture, simulate_events
@@ -272,7 +272,7 @@ def _scene_motions(recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.rando
             m = motion.trim(start, start + window + 2.0 / motion.fps_hz)
             m2 = mirror(m, rng, prob=maug.mirror_prob)
             factor = float(maug.bone_scale.draw(rng))
-            m3 = bone_scale(m2, rng, factor=factor)
+            m3 = decorrelate(bone_scale(m2, rng, factor=factor), rng, prob=maug.decorrelate_prob)
             subjects.append(_recenter(m3) if recipe.capture.recenter else m3)
             records.append(
                 {
@@ -282,6 +282,7 @@ def _scene_motions(recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.rando
                     "start_s": start,
                     "mirrored": m2 is not m,
                     "bone_scale": factor,
+                    "decorrelated": m3.name.endswith("+decorrelated"),
                 }
             )
         if len(subjects) > 1:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from gttdata.augment.capture import axis_angle_matrix, camera_perturbation, global_rotation
-from gttdata.augment.motion import bone_scale, mirror
+from gttdata.augment.motion import bone_scale, decorrelate, mirror
 from gttdata.augment.registry import (
     AUGMENT_LEVELS,
     Augmentation,
@@ -20,6 +20,7 @@ __all__ = [
     "axis_angle_matrix",
     "bone_scale",
     "camera_perturbation",
+    "decorrelate",
     "get_augmentation",
     "global_rotation",
     "mirror",

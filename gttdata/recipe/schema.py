@@ -228,10 +228,13 @@ class MotionAugmentSpec:
     Args:
         mirror_prob: Probability of a left/right mirror.
         bone_scale: Factor applied to every bone length.
+        decorrelate_prob: Probability of the "decorrelated motion" control: an independent random rigid
+            motion per joint trajectory (:func:`gttdata.augment.decorrelate`).
     """
 
     mirror_prob: float = _f(0.0, ge=0, le=1)
     bone_scale: Param = _p(1.0, gt=0)
+    decorrelate_prob: float = _f(0.0, ge=0, le=1)
 
 
 @dataclass(frozen=True)
