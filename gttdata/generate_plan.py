@@ -184,12 +184,40 @@ def _load(ref: MotionRef, src: ProceduralSource | FileSource) -> Motion:
     return motion
 
 
-def _pick_refs(refs, sources, k: int, rng: np.random.Generator) -> list[MotionRef]:
-    """``k`` motions, by source weight (split evenly within a source), distinct when possible."""
+def _pick_refs(refs, sources, k: int, rng: np.random.Generator, first: int | None = None) -> list[MotionRef]:
+    """``k`` motions, by source weight (split evenly within a source), distinct when possible.
+
+    ``first`` (an index into ``refs``) fixes the first motion; the others are drawn without it.
+    """
     per_source = np.bincount([r.source for r in refs], minlength=len(sources))
     p = np.array([sources[r.source].weight / per_source[r.source] for r in refs])
-    idx = rng.choice(len(refs), size=k, replace=k > len(refs), p=p / p.sum())
-    return [refs[i] for i in np.atleast_1d(idx)]
+    if first is None:
+        idx = rng.choice(len(refs), size=k, replace=k > len(refs), p=p / p.sum())
+        return [refs[i] for i in np.atleast_1d(idx)]
+    if k == 1:
+        return [refs[first]]
+    rest = np.delete(np.arange(len(refs)), first) if len(refs) > 1 else np.arange(len(refs))
+    q = p[rest]
+    idx = rng.choice(rest, size=k - 1, replace=k - 1 > len(rest), p=q / q.sum())
+    return [refs[first], *(refs[i] for i in np.atleast_1d(idx))]
+
+
+def _first_motion(recipe: GenerateRecipe, split: str, refs, sources, index: int) -> int | None:
+    """Index into ``refs`` of sample ``index``'s first motion, covering the split's motions evenly.
+
+    When every motion has the same weight, sample i takes motion ``order[i mod M]`` of a permutation
+    seeded by (recipe seed, split) alone, so M consecutive samples use M distinct motions (a test split
+    of 10 samples over 10 motions uses each once) and sample i still depends only on (seed, split, i).
+    With unequal weights the first motion is drawn by weight (returns None).
+    """
+    per_source = np.bincount([r.source for r in refs], minlength=len(sources))
+    p = np.array([sources[r.source].weight / per_source[r.source] for r in refs])
+    if not np.allclose(p, p[0]):
+        return None
+    order = np.random.default_rng(np.random.SeedSequence([recipe.seed, split_id(split)])).permutation(
+        len(refs)
+    )
+    return int(order[index % len(refs)])
 
 
 def _recenter(motion: Motion) -> Motion:
@@ -244,11 +272,13 @@ def _capture_params(
     )
 
 
-def _scene_motions(recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.random.Generator):
+def _scene_motions(
+    recipe: GenerateRecipe, split: SplitSpec, refs, rng: np.random.Generator, *, first: int | None = None
+):
     """Motion windows of every event (subjects merged); also the window length and per-motion records."""
     scene = recipe.scene
     n_events = int(scene.n_events.draw(rng))
-    picked = _pick_refs(refs, split.sources, n_events * scene.n_subjects, rng)
+    picked = _pick_refs(refs, split.sources, n_events * scene.n_subjects, rng, first)
     full = [_load(r, split.sources[r.source]) for r in picked]
     first = split.sources[picked[0].source]
     window = float((first.window_s or recipe.capture.window_s).draw(rng))
@@ -319,7 +349,9 @@ def build_sample(recipe: GenerateRecipe, split: str, index: int) -> list[Capture
     r_motion, r_rig, r_capture, r_sim, *r_aug = (
         np.random.default_rng(c) for c in ss.spawn(4 + len(recipe.augmentations))
     )
-    events, window, records = _scene_motions(recipe, spec, list_motions(recipe, split), r_motion)
+    refs = list_motions(recipe, split)
+    first = _first_motion(recipe, split, refs, spec.sources, index)
+    events, window, records = _scene_motions(recipe, spec, refs, r_motion, first=first)
     rig, rig_meta = _build_rig(recipe, r_rig)
     params = _capture_params(recipe, len(rig), window, r_capture)
     name = sample_key(recipe, split, index)
