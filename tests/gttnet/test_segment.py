@@ -80,9 +80,12 @@ def test_tiny_events_capture_ari_one():
             "capture.sigma_px=0",
             "scene.n_events=2",
             "scene.event_gap_s=1.0",
+            # Well-separated events by construction (a run and a jog would share poses).
+            "splits.test.sources.0.kinds=[gesture, run]",
         ],
     )
     sample = build_sample(recipe, "test", 0)[0]
+    assert sorted(m["name"].split("/")[1] for m in sample.meta["motions"]) == ["gesture", "run"]
     obs, gt = make_view(sample, "none")
     rec, seg = segment_capture(obs, method="dloe")
     event = np.asarray(sample.meta["event_id"])[gt.perm]
