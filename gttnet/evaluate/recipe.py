@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
-import types
 import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -14,6 +12,7 @@ import yaml
 
 from gttdata.capture.views import SEQUENCING
 from gttdata.recipe import apply_overrides
+from gttnet._typed_yaml import build_dataclass
 from gttnet.errors import GttNetError
 
 __all__ = [
@@ -218,68 +217,13 @@ PAPER_SWEEPS: list[dict] = [
 ]
 
 
-def _type_name(tp: object) -> str:
-    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
-
-
-def _convert(tp: object, value: object, key: str) -> object:
-    origin = typing.get_origin(tp)
-    if tp is typing.Any:
-        return value
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if value is None:
-            return None
-        errors = []
-        for a in args:
-            try:
-                return _convert(a, value, key)
-            except EvalRecipeError as exc:
-                errors.append(str(exc))
-        raise EvalRecipeError(errors[0])
+def _shorthand(tp: object, value: object) -> object:
+    """A sweep value may be a bare number, a method entry a bare method name."""
     if tp is SweepValue and not isinstance(value, dict):
-        value = {"value": value}
+        return {"value": value}
     if tp is MethodEntry and isinstance(value, str):
-        value = {"method": value}
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, key)
-    if origin is list:
-        if not isinstance(value, list):
-            raise EvalRecipeError(f"{key}: expected a list, found {value!r}")
-        (item,) = typing.get_args(tp)
-        return [_convert(item, v, f"{key}.{i}") for i, v in enumerate(value)]
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise EvalRecipeError(f"{key}: expected a mapping, found {value!r}")
-        return {str(k): v for k, v in value.items()}
-    return _convert_scalar(tp, value, key)
-
-
-def _convert_scalar(tp: object, value: object, key: str) -> object:
-    is_num = isinstance(value, int | float) and not isinstance(value, bool)
-    if tp is float and is_num:
-        return float(value)
-    if tp is int and is_num and float(value).is_integer():
-        return int(value)
-    if tp in (bool, str) and isinstance(value, tp):
-        return value
-    raise EvalRecipeError(f"{key}: expected {_type_name(tp)}, found {value!r}")
-
-
-def _build(cls: type, data: object, key: str) -> object:
-    if not isinstance(data, dict):
-        raise EvalRecipeError(f"{key or 'recipe'}: expected a mapping, found {data!r}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        where = f"{key}.{unknown[0]}" if key else unknown[0]
-        raise EvalRecipeError(f"{where}: unknown key; expected one of {', '.join(names)}")
-    kwargs = {k: _convert(hints[k], v, f"{key}.{k}" if key else k) for k, v in data.items()}
-    try:
-        return cls(**kwargs)
-    except (TypeError, ValueError) as exc:
-        raise EvalRecipeError(f"{key or 'recipe'}: {exc}") from exc
+        return {"method": value}
+    return value
 
 
 def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
@@ -294,7 +238,7 @@ def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
             data["sweeps"] = copy.deepcopy(PAPER_SWEEPS)
         if step == 0:
             data = apply_overrides(data, overrides, "evaluation recipe", error=EvalRecipeError)
-    return _build(EvalRecipe, data, "")
+    return build_dataclass(EvalRecipe, data, error=EvalRecipeError, shorthand=_shorthand)
 
 
 def load_eval_recipe(path: str | Path, overrides: Sequence[str] = ()) -> EvalRecipe:

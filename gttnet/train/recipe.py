@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import types
 import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -12,6 +11,7 @@ from pathlib import Path
 import yaml
 
 from gttdata.recipe import apply_overrides
+from gttnet._typed_yaml import build_dataclass
 from gttnet.errors import GttNetError
 from gttnet.train.stages import Stage
 
@@ -175,69 +175,6 @@ class TrainRecipe:
             raise ValueError(f"train.dtype must be float32 or float64, got {self.train.dtype!r}")
 
 
-def _type_name(tp: object) -> str:
-    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
-
-
-def _convert(tp: object, value: object, key: str) -> object:
-    origin = typing.get_origin(tp)
-    if tp is typing.Any:
-        return value
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _convert(a, value, key)
-            except RecipeError as exc:
-                errors.append(str(exc))
-        raise RecipeError(errors[0] if errors else f"{key}: unexpected {value!r}")
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, key)
-    if origin is list:
-        if not isinstance(value, list):
-            raise RecipeError(f"{key}: expected a list, found {value!r}")
-        (item,) = typing.get_args(tp)
-        return [_convert(item, v, f"{key}.{i}") for i, v in enumerate(value)]
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise RecipeError(f"{key}: expected a mapping, found {value!r}")
-        _, vt = typing.get_args(tp)
-        return {str(k): _convert(vt, v, f"{key}.{k}") for k, v in value.items()}
-    return _convert_scalar(tp, value, key)
-
-
-def _convert_scalar(tp: object, value: object, key: str) -> object:
-    is_num = isinstance(value, int | float) and not isinstance(value, bool)
-    if tp is float and is_num:
-        return float(value)
-    if (tp is int and is_num and float(value).is_integer()) or (tp in (bool, str) and isinstance(value, tp)):
-        return int(value) if tp is int else value
-    raise RecipeError(f"{key}: expected {_type_name(tp)}, found {value!r}")
-
-
-def _build(cls: type, data: object, key: str) -> object:
-    if not isinstance(data, dict):
-        raise RecipeError(f"{key or 'recipe'}: expected a mapping, found {data!r}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        where = f"{key}.{unknown[0]}" if key else unknown[0]
-        raise RecipeError(f"{where}: unknown key; expected one of {', '.join(names)}")
-    kwargs = {k: _convert(hints[k], v, f"{key}.{k}" if key else k) for k, v in data.items()}
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:
-        raise RecipeError(f"{key or 'recipe'}: {exc}") from exc
-    except ValueError as exc:
-        raise RecipeError(f"{key or 'recipe'}: {exc}") from exc
-
-
 def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe:
     """Build a :class:`TrainRecipe` from a plain mapping and ``key.sub=value`` overrides.
 
@@ -246,7 +183,7 @@ def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe
     """
     data = yaml.safe_load(yaml.safe_dump(data)) or {}
     apply_overrides(data, overrides, "train recipe", error=RecipeError)
-    return typing.cast(TrainRecipe, _build(TrainRecipe, data, ""))
+    return typing.cast(TrainRecipe, build_dataclass(TrainRecipe, data, error=RecipeError))
 
 
 def load_train_recipe(path: str | Path, overrides: Sequence[str] = ()) -> TrainRecipe:
