@@ -11,6 +11,7 @@ from gttdata.capture.views import SEQUENCING, GroundTruth, Observations, make_vi
 from gttdata.errors import GttDataError
 from gttdata.mocap.motion import Motion
 from gttdata.skeleton import Skeleton, cmu31
+from gttdata.skeletons import available_skeletons, derive_from_cmu31, get_skeleton
 
 __version__ = "0.1.0"
 
@@ -25,7 +26,10 @@ __all__ = [
     "Observations",
     "SEQUENCING",
     "Skeleton",
+    "available_skeletons",
     "cmu31",
+    "derive_from_cmu31",
+    "get_skeleton",
     "look_at",
     "make_view",
     "ring_rig",

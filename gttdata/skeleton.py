@@ -64,10 +64,14 @@ class Skeleton:
     Args:
         name: Topology name, e.g. ``"cmu31"``.
         joint_names: Joint names, length J.
-        parents: Parent index of each joint (``-1`` for a root), length J. A parent precedes its child.
+        parents: Parent index of each joint (``-1`` for a root), length J. The parents form a forest
+            (no cycles); a parent need not precede its child (detector keypoint sets keep their
+            canonical order), :attr:`topological_order` lists parents first.
         mirror: Index of each joint's left/right counterpart (itself on the midline), length J.
             Derived from the names when empty.
         aliases: Alternative names per joint (e.g. BVH names), mapped to the joint index.
+        extra_bones: Drawn links outside the parent tree, as ``(i, j)`` index pairs (e.g. COCO's
+            shoulder-to-shoulder limb). Not used for bone-length edits.
     """
 
     name: str
@@ -75,6 +79,7 @@ class Skeleton:
     parents: tuple[int, ...]
     mirror: tuple[int, ...] = ()
     aliases: dict[str, int] = field(default_factory=dict, compare=False, hash=False)
+    extra_bones: tuple[tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         j = len(self.joint_names)
@@ -83,11 +88,25 @@ class Skeleton:
         if len(self.parents) != j:
             raise ValueError(f"skeleton {self.name!r}: parents must have length {j}, got {len(self.parents)}")
         for i, p in enumerate(self.parents):
-            if not (-1 <= p < i):
+            if not (-1 <= p < j) or p == i:
                 raise ValueError(
-                    f"skeleton {self.name!r}: parent of joint {i} ({self.joint_names[i]}) must be -1 or a "
-                    f"preceding index, got {p}"
+                    f"skeleton {self.name!r}: parent of joint {i} ({self.joint_names[i]}) must be -1 or another "
+                    f"joint index in [0, {j}), got {p}"
                 )
+        for i in range(j):  # walk to the root; more than J steps means a cycle
+            k, steps = i, 0
+            while k >= 0 and steps <= j:
+                k, steps = self.parents[k], steps + 1
+            if k >= 0:
+                raise ValueError(
+                    f"skeleton {self.name!r}: parents form a cycle through joint {i} ({self.joint_names[i]})"
+                )
+        extra = tuple((int(a), int(b)) for a, b in self.extra_bones)
+        if any(not (0 <= a < j and 0 <= b < j) or a == b for a, b in extra):
+            raise ValueError(
+                f"skeleton {self.name!r}: extra_bones must pair two distinct joints in [0, {j}), got {extra}"
+            )
+        object.__setattr__(self, "extra_bones", extra)
         if len(set(self.joint_names)) != j:
             raise ValueError(f"skeleton {self.name!r}: joint names must be unique")
         if not self.mirror:
@@ -105,6 +124,23 @@ class Skeleton:
         """Bones as (child, parent) index pairs, shape ``(J - roots, 2)``, int64."""
         return np.array([(i, p) for i, p in enumerate(self.parents) if p >= 0], dtype=np.int64).reshape(-1, 2)
 
+    @property
+    def limbs(self) -> np.ndarray:
+        """Every drawn link: the tree bones then :attr:`extra_bones`, shape ``(L, 2)``, int64."""
+        extra = np.array(self.extra_bones, dtype=np.int64).reshape(-1, 2)
+        return np.concatenate([self.bones, extra], axis=0)
+
+    @property
+    def topological_order(self) -> tuple[int, ...]:
+        """Joint indices with every parent before its children (roots first, then by depth, stable)."""
+        depth = []
+        for i in range(self.n_joints):
+            d, k = 0, self.parents[i]
+            while k >= 0:
+                d, k = d + 1, self.parents[k]
+            depth.append(d)
+        return tuple(sorted(range(self.n_joints), key=lambda i: (depth[i], i)))
+
     def flip_index(self) -> np.ndarray:
         """Permutation that swaps left and right joints, shape ``(J,)``."""
         return np.asarray(self.mirror, dtype=np.int64)
@@ -119,12 +155,15 @@ class Skeleton:
 
     def to_dict(self) -> dict:
         """JSON-serialisable form (inverse of :meth:`from_dict`)."""
-        return {
+        d = {
             "name": self.name,
             "joint_names": list(self.joint_names),
             "parents": list(self.parents),
             "mirror": list(self.mirror),
         }
+        if self.extra_bones:
+            d["extra_bones"] = [list(b) for b in self.extra_bones]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict, *, source: str = "<dict>") -> Skeleton:
@@ -138,6 +177,7 @@ class Skeleton:
                 joint_names=tuple(str(n) for n in d["joint_names"]),
                 parents=tuple(int(p) for p in d["parents"]),
                 mirror=tuple(int(m) for m in d.get("mirror", ())),
+                extra_bones=tuple((int(a), int(b)) for a, b in d.get("extra_bones", ())),
             )
         except (TypeError, ValueError) as exc:
             raise MotionFormatError(f"{source}: invalid skeleton: {exc}") from exc

@@ -4,9 +4,10 @@ Layout (both formats; HDF5 keeps ``fps_hz``, ``units`` and ``name`` as root attr
     * ``positions``: float, shape ``(T, J, 3)``, world z-up (no axis conversion is applied).
     * ``fps_hz``: scalar, Hz.
     * ``joint_names``: strings, length J.
-    * ``parents``: ints, length J (-1 for roots, parents precede children).
+    * ``parents``: ints, length J (-1 for roots; the parents form a forest).
     * optional ``units``: ``"m"`` (default), ``"cm"`` or ``"mm"``; converted to metres on load.
-    * optional ``mirror`` (ints, length J), ``skeleton_name`` and ``name``; written by :func:`save_motion`.
+    * optional ``mirror`` (ints, length J), ``extra_bones`` (ints, shape ``(E, 2)``), ``skeleton_name`` and
+      ``name``; written by :func:`save_motion`.
 """
 
 from __future__ import annotations
@@ -97,15 +98,18 @@ def _build(path: Path, fmt: str, fields: dict) -> Motion:
 def _skeleton(path: Path, fields: dict, names: tuple[str, ...], parents: tuple[int, ...]) -> Skeleton:
     sk_name = _as_str(fields.get("skeleton_name", path.stem))
     mirror = tuple(int(m) for m in np.asarray(fields.get("mirror", ())).ravel())
+    extra = tuple(
+        (int(a), int(b)) for a, b in np.asarray(fields.get("extra_bones", ()), dtype=np.int64).reshape(-1, 2)
+    )
     if names == CMU31_JOINTS and (sk_name == "cmu31" or "skeleton_name" not in fields):
         cmu = cmu31()
         if parents == cmu.parents and mirror in ((), cmu.mirror):
             return cmu
     try:
-        return Skeleton(name=sk_name, joint_names=names, parents=parents, mirror=mirror)
+        return Skeleton(name=sk_name, joint_names=names, parents=parents, mirror=mirror, extra_bones=extra)
     except ValueError as exc:
         if "mirror" in str(exc) and not mirror:
-            return Skeleton(sk_name, names, parents, mirror=tuple(range(len(names))))
+            return Skeleton(sk_name, names, parents, mirror=tuple(range(len(names))), extra_bones=extra)
         raise MotionFormatError(f"{path}: fields 'joint_names'/'parents'/'mirror': {exc}") from None
 
 
@@ -168,6 +172,7 @@ def save_motion(motion: Motion, path: str | Path) -> Path:
         "joint_names": np.array(sk.joint_names, dtype=str),
         "parents": np.array(sk.parents, dtype=np.int64),
         "mirror": np.array(sk.mirror, dtype=np.int64),
+        "extra_bones": np.array(sk.extra_bones, dtype=np.int64).reshape(-1, 2),
         "units": "m",
         "skeleton_name": sk.name,
         "name": motion.name,
@@ -179,7 +184,7 @@ def save_motion(motion: Motion, path: str | Path) -> Path:
             np.savez_compressed(fh, **fields)
     elif suffix in (".h5", ".hdf5"):
         with h5py.File(tmp, "w") as f:
-            for k in ("positions", "parents", "mirror"):
+            for k in ("positions", "parents", "mirror", "extra_bones"):
                 f.create_dataset(k, data=fields[k])
             f.create_dataset(
                 "joint_names", data=np.array(sk.joint_names, dtype=object), dtype=h5py.string_dtype()

@@ -108,7 +108,8 @@ class Motion:
         """
         f = np.broadcast_to(np.asarray(factor, dtype=np.float64), (self.skeleton.n_joints,))
         out = self.positions.copy()
-        for j, p in enumerate(self.skeleton.parents):
+        for j in self.skeleton.topological_order:
+            p = self.skeleton.parents[j]
             if p >= 0:
                 out[:, j] = out[:, p] + f[j] * (self.positions[:, j] - self.positions[:, p])
         return replace(self, positions=out)

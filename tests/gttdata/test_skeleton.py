@@ -71,8 +71,10 @@ def test_mirror_derived_from_left_right_names():
     [
         ({"joint_names": (), "parents": ()}, "non-empty"),
         ({"joint_names": ("a", "b"), "parents": (-1,)}, "length 2"),
-        ({"joint_names": ("a", "b"), "parents": (-1, 1)}, "preceding index"),
-        ({"joint_names": ("a", "b"), "parents": (1, -1)}, "preceding index"),
+        ({"joint_names": ("a", "b"), "parents": (-1, 1)}, "another joint index"),
+        ({"joint_names": ("a", "b"), "parents": (-1, 2)}, "another joint index"),
+        ({"joint_names": ("a", "b", "c"), "parents": (-1, 2, 1)}, "cycle"),
+        ({"joint_names": ("a", "b"), "parents": (-1, 0), "extra_bones": ((0, 0),)}, "extra_bones"),
         ({"joint_names": ("a", "a"), "parents": (-1, 0)}, "unique"),
         ({"joint_names": ("a", "b"), "parents": (-1, 0), "mirror": (1, 1)}, "involution"),
     ],
