@@ -9,6 +9,7 @@ __all__ = [
     "RigError",
     "ShardFormatError",
     "ManifestError",
+    "OutputError",
     "PreviewDependencyError",
     "RendererUnavailableError",
 ]
@@ -36,6 +37,11 @@ class ShardFormatError(GttDataError):
 
 class ManifestError(GttDataError):
     """A manifest is missing, malformed, or disagrees with the shards on disk."""
+
+
+class OutputError(GttDataError):
+    """An output cannot be written: full disk, read-only file system, an existing output without
+    ``--resume``/``--overwrite``, or a folder another process is writing (names the path)."""
 
 
 class PreviewDependencyError(GttDataError):

@@ -293,7 +293,10 @@ class SequenceDataset(torch.utils.data.Dataset):
         if self.cache == "disk":
             path = self.cache_dir / f"{index:06d}-{sequencing}-{variant}-k{self.k}.pt"
             if path.is_file():
-                return torch.load(path, weights_only=False)
+                try:
+                    return torch.load(path, weights_only=False)
+                except Exception:  # noqa: BLE001 - a damaged cache entry is rebuilt, never trusted
+                    log.warning("%s: unreadable cached item, rebuilding it", path)
         obs, gt = self.source.view(index, sequencing, variant)
         item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}")
         if path is not None:

@@ -8,6 +8,7 @@ import importlib.metadata as md
 import click
 
 from gttdata.errors import GttDataError
+from gttdata.fileio import describe_os_error
 
 __all__ = ["main", "friendly_errors"]
 
@@ -34,10 +35,9 @@ def friendly_errors(fn):
             raise click.ClickException(str(exc)) from exc
         except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
             raise click.ClickException(f"{exc.filename}: {exc.strerror}") from exc
-        except OSError as exc:
-            if exc.errno == 28:  # ENOSPC
-                raise click.ClickException(f"{exc.filename or 'output'}: no space left on device") from exc
-            raise click.ClickException(str(exc)) from exc
+        except OSError as exc:  # ENOSPC, EROFS...: one line naming the path
+            reason = describe_os_error(exc)
+            raise click.ClickException(f"{exc.filename}: {reason}" if exc.filename else reason) from exc
 
     return wrapper
 

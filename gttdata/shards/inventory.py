@@ -2,27 +2,18 @@
 
 from __future__ import annotations
 
-import hashlib
 import re
 from collections.abc import Iterable
 from pathlib import Path
 
 from gttdata.errors import ShardFormatError
+from gttdata.fileio import file_sha256
 from gttdata.shards.reader import ShardReader
 from gttdata.shards.schema import SHARD_SUFFIX, TMP_SUFFIX, check_schema_version
 
 __all__ = ["check_files", "file_sha256", "scan_shards", "summarise_stats"]
 
 _SHARD_RE = re.compile(r"^shard-\d{5}(\.p\d+)?" + re.escape(SHARD_SUFFIX) + "$")
-
-
-def file_sha256(path: str | Path, *, chunk: int = 1 << 22) -> str:
-    """SHA-256 hex digest of a file, read in 4 MiB chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def scan_shards(root: str | Path) -> tuple[list[Path], list[Path]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -13,6 +14,7 @@ import h5py
 import numpy as np
 
 from gttdata.capture.sample import CaptureSample
+from gttdata.fileio import fsync_dir, reserve_space, trim_reserve
 from gttdata.shards.schema import (
     COMPRESSIONS,
     GT_TOLERANCE_M,
@@ -31,6 +33,9 @@ from gttdata.shards.schema import (
 __all__ = ["ShardInfo", "ShardWriter", "merge_stats", "sample_stats", "variant_from_orig"]
 
 _log = logging.getLogger(__name__)
+
+# Disk space reserved per sample on top of its raw array bytes: object headers, attributes, B-trees.
+_SAMPLE_MARGIN_BYTES = 1 << 18
 
 # A variant's ground truth is recomputed from the original's; it must agree with what the augmentation
 # produced to well below the GT precision promise (1e-6 m).
@@ -226,6 +231,10 @@ class ShardWriter:
                 f"sample {orig.name!r}: every sample of a shard must hold variants {self._variants}, got {names}"
             )
         before = self._file.id.get_filesize()
+        # HDF5 does not survive a failed write (a full disk segfaulted the process): reserve the space
+        # first, so a full disk is one clean error here and the writes below cannot fail for space.
+        need = _SAMPLE_MARGIN_BYTES + sum(_nbytes(s) for s in group)
+        reserve_space(self._file.id.get_vfd_handle(), before, need, self._path())
         self._write_group(self._file[SAMPLES_GROUP], self._next_sample, orig, variants)
         self._stats = merge_stats(self._stats, sample_stats(orig))
         if not self._skeleton:
@@ -255,7 +264,7 @@ class ShardWriter:
             _log.debug("wrote %s (%d samples, %d bytes)", info.path, info.n_samples, info.bytes)
         self.finished.extend(info for _, info in self._pending)
         if self._pending:
-            _fsync_dir(self.out_dir)
+            fsync_dir(self.out_dir)
         self._pending = []
 
     def abort(self) -> None:
@@ -324,6 +333,7 @@ class ShardWriter:
         f.attrs["skeleton"] = self._skeleton
         f.close()
         self._file = None
+        trim_reserve(tmp)
         _fsync_file(tmp)
         info = ShardInfo(
             path=self._path(),
@@ -342,6 +352,12 @@ class ShardWriter:
             self._part += 1
         else:
             self._index += 1
+
+
+def _nbytes(sample: CaptureSample) -> int:
+    """Raw bytes of a sample's arrays (an upper bound of what a compressed write adds, bar metadata)."""
+    values = (getattr(sample, f.name) for f in dataclasses.fields(sample))
+    return sum(v.nbytes for v in values if isinstance(v, np.ndarray))
 
 
 def _create_group(parent: h5py.Group, name: str) -> h5py.Group:
@@ -366,15 +382,3 @@ def _fsync_file(path: Path) -> None:
     """Flush a closed file's data to disk (the rename that follows must not outrun it)."""
     with open(path, "rb+") as fh:
         os.fsync(fh.fileno())
-
-
-def _fsync_dir(path: Path) -> None:
-    """Make the renames durable (a no-op where directories cannot be opened, e.g. Windows)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

@@ -16,19 +16,33 @@ __all__ = ["register", "train_command"]
 @click.argument("recipe", required=False, type=click.Path(dir_okay=False))
 @click.argument("overrides", nargs=-1)
 @click.option(
-    "--resume", "resume", type=click.Path(file_okay=False), help="Continue the run in RUN_DIR exactly."
+    "--resume",
+    "resume",
+    is_flag=False,
+    flag_value="",
+    default=None,
+    metavar="[RUN_DIR]",
+    help="Continue an interrupted run exactly: the run in --out (same recipe only), or RUN_DIR with its "
+    "saved recipe.",
 )
 @click.option(
-    "--out", "out", type=click.Path(file_okay=False), help="Run directory (default: runs/<name>-<time>)."
+    "--out",
+    "out",
+    type=click.Path(file_okay=False),
+    help="Run directory (default: runs/<name>-<time>); refused if it holds a run, unless --resume/--overwrite.",
 )
+@click.option("--overwrite", is_flag=True, help="Replace the run already in --out (its files are deleted).")
 @click.option(
     "--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="Override train.device."
 )
 @click.option("--max-steps", type=int, default=None, help="Stop (with a checkpoint) after this many steps.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @friendly_errors
-def train_command(recipe, overrides, resume, out, device, max_steps, quiet) -> None:
+def train_command(recipe, overrides, resume, out, device, max_steps, quiet, overwrite) -> None:
     """Train GTT-Net with RECIPE (recipes/gttnet/*.yaml) and key.sub=value OVERRIDES.
+
+    An existing run in --out is never overwritten silently: --resume continues it (same recipe),
+    --overwrite replaces it.
 
     Example: gttnet train recipes/gttnet/tiny.yaml stages.0.steps=5 --device cpu
     """
@@ -37,15 +51,25 @@ def train_command(recipe, overrides, resume, out, device, max_steps, quiet) -> N
 
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    if resume is None and recipe is None:
+    if not resume and recipe is None:
         raise click.UsageError("give a RECIPE (e.g. recipes/gttnet/tiny.yaml) or --resume RUN_DIR")
-    if resume is not None and overrides:
+    if resume == "" and out is None:
+        raise click.UsageError("--resume without RUN_DIR needs --out RUN_DIR (the run to continue)")
+    if resume and recipe is None and overrides:
         raise click.UsageError(
             "overrides cannot be combined with --resume: the run's recipe is used as saved"
         )
     try:
-        parsed = None if resume is not None else load_train_recipe(recipe, overrides)
-        result = train(parsed, out=out, device=device, resume=resume, max_steps=max_steps, progress=not quiet)
+        parsed = None if recipe is None else load_train_recipe(recipe, overrides)
+        result = train(
+            parsed,
+            out=out,
+            device=device,
+            resume=True if resume == "" else resume,
+            overwrite=overwrite,
+            max_steps=max_steps,
+            progress=not quiet,
+        )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     if int(os.environ.get("RANK", "0")) != 0:

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +12,7 @@ import torch
 from gttdata.capture.views import Observations
 from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.errors import ModelError
+from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
 from gttnet.model.inputs import prepare_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
 
@@ -30,11 +29,10 @@ log = logging.getLogger(__name__)
 
 #: The model shipped with the package (written by the lead after training ``recipes/gttnet/default.yaml``).
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "assets" / "gttnet_default.pt"
-MODEL_FORMAT = "gttnet-model/1"
 
 
 def save_model(path: str | Path, model: GTTNet, *, card: dict | None = None) -> Path:
-    """Write a model file (weights + config) and its JSON model card next to it (``.json``).
+    """Write a model file (weights + config) and its JSON model card, with the file's SHA-256, next to it.
 
     Args:
         path: Destination ``.pt`` file.
@@ -43,18 +41,18 @@ def save_model(path: str | Path, model: GTTNet, *, card: dict | None = None) -> 
 
     Returns:
         The model path.
+
+    Raises:
+        OutputError: One line naming the path when the write fails.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    state = {k: v.detach().cpu().float() for k, v in model.state_dict().items()}
-    torch.save({"format": MODEL_FORMAT, "config": asdict(model.config), "state_dict": state}, path)
-    info = {"format": MODEL_FORMAT, "config": asdict(model.config), **(card or {})}
-    path.with_suffix(".json").write_text(json.dumps(info, indent=2, default=str) + "\n")
-    return path
+    return write_model_file(path, model, card=card)
 
 
 def load_model(path: str | Path | None = None, *, device: str | torch.device = "cpu") -> GTTNet:
     """Load a model file, a training run's checkpoint, or (``path=None``) the bundled model.
+
+    The file is checked first: a model file against the SHA-256 in its card, a checkpoint against its
+    own header (see :mod:`gttnet.model.files`).
 
     Args:
         path: A file written by :func:`save_model`, a ``checkpoint.pt``, a run directory, or None.
@@ -64,7 +62,7 @@ def load_model(path: str | Path | None = None, *, device: str | torch.device = "
         The network in eval mode.
 
     Raises:
-        ModelError: If there is no such file, no bundled model, or the file is not a GTT-Net model.
+        ModelError: No such file, no bundled model, a checksum mismatch, or not a GTT-Net model.
     """
     if path is None:
         if not BUNDLED_MODEL.is_file():
@@ -76,20 +74,12 @@ def load_model(path: str | Path | None = None, *, device: str | torch.device = "
     p = Path(path)
     if p.is_dir():
         p = p / "model.pt" if (p / "model.pt").is_file() else p / "checkpoint.pt"
-    if not p.is_file():
-        raise ModelError(f"no trained model is available: {p} does not exist")
+    payload = read_model_file(p)
+    cfg = {**payload["config"], "widths": tuple(payload["config"]["widths"])}
     try:
-        payload = torch.load(p, map_location="cpu", weights_only=False)
-    except Exception as exc:  # torch raises many types for a corrupt file
-        raise ModelError(f"{p}: not a readable GTT-Net model ({exc.__class__.__name__})") from exc
-    if not isinstance(payload, dict) or ("config" not in payload and "model_config" not in payload):
-        raise ModelError(f"{p}: not a GTT-Net model file (no config)")
-    cfg = payload.get("config", payload.get("model_config"))
-    cfg = {**cfg, "widths": tuple(cfg["widths"])}
-    model = GTTNet(GTTNetConfig(**cfg))
-    try:
-        model.load_state_dict(payload.get("state_dict", payload.get("model")))
-    except RuntimeError as exc:
+        model = GTTNet(GTTNetConfig(**cfg))
+        model.load_state_dict(payload["state_dict"])
+    except (TypeError, RuntimeError) as exc:
         raise ModelError(f"{p}: weights do not match the stored config ({str(exc).splitlines()[0]})") from exc
     return model.to(device).eval()
 

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-import os
 import random
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
+
+from gttnet.errors import ModelError
+from gttnet.model.files import CHECKPOINT_FORMAT, load_checked, save_checked
 
 __all__ = [
     "LoopState",
@@ -76,7 +78,7 @@ def save_checkpoint(
     state: LoopState,
     recipe: dict,
 ) -> Path:
-    """Write ``run_dir/checkpoint.pt`` atomically (temporary file, then rename).
+    """Write ``run_dir/checkpoint.pt`` atomically, with a SHA-256 header (:func:`gttnet.model.files.save_checked`).
 
     Args:
         run_dir: Run directory.
@@ -89,9 +91,8 @@ def save_checkpoint(
         The checkpoint path.
     """
     path = Path(run_dir) / CHECKPOINT_NAME
-    tmp = path.with_suffix(".pt.tmp")
     payload = {
-        "format": "gttnet-checkpoint/1",
+        "format": CHECKPOINT_FORMAT,
         "model": model.state_dict(),
         "model_config": asdict(model.config),
         "optimizer": optimizer.state_dict(),
@@ -99,20 +100,24 @@ def save_checkpoint(
         "rng": rng_states(),
         "recipe": recipe,
     }
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
-    return path
+    return save_checked(path, payload)
 
 
 def load_checkpoint(run_dir: str | Path) -> dict:
     """Read ``run_dir/checkpoint.pt`` (CPU tensors) with ``state`` as a :class:`LoopState`.
 
+    The file's SHA-256 header is checked first: a corrupt checkpoint never resumes.
+
     Raises:
         FileNotFoundError: If the run directory has no checkpoint.
+        ModelError: An empty, truncated, bit-flipped or unreadable checkpoint (one line).
     """
     path = Path(run_dir) / CHECKPOINT_NAME
     if not path.is_file():
         raise FileNotFoundError(2, "no checkpoint to resume from", str(path))
-    payload = torch.load(path, map_location="cpu", weights_only=False)
-    payload["state"] = LoopState(**payload["state"])
+    payload = load_checked(path)
+    try:
+        payload["state"] = LoopState(**payload["state"])
+    except (KeyError, TypeError) as exc:
+        raise ModelError(f"{path}: expected a training checkpoint with a loop state, found {exc}") from exc
     return payload

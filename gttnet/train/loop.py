@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -19,13 +20,21 @@ import torch.distributed as dist
 import yaml
 from tqdm import tqdm
 
+from gttdata.fileio import OutputLock
 from gttnet.data import EpochStream, SequenceDataset, TrainItem, collate_items, open_source
 from gttnet.model.inference import load_model, save_model
 from gttnet.model.inputs import random_rotation
 from gttnet.model.network import GTTNet, build_model
-from gttnet.train.checkpoint import LoopState, load_checkpoint, save_checkpoint, set_rng_states
+from gttnet.train.checkpoint import (
+    CHECKPOINT_NAME,
+    LoopState,
+    load_checkpoint,
+    save_checkpoint,
+    set_rng_states,
+)
 from gttnet.train.objective import StepObjective, stage_losses
 from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
+from gttnet.train.rundir import open_run
 from gttnet.train.stages import Stage
 
 __all__ = ["RunResult", "select_device", "freeze_parts", "train"]
@@ -356,7 +365,8 @@ def train(
     *,
     out: str | Path | None = None,
     device: str | None = None,
-    resume: str | Path | None = None,
+    resume: bool | str | Path | None = None,
+    overwrite: bool = False,
     max_steps: int | None = None,
     progress: bool = True,
 ) -> RunResult:
@@ -368,21 +378,33 @@ def train(
 
     Args:
         recipe: The recipe; omitted when resuming (the run's resolved recipe is used).
-        out: Run directory (default ``recipe.out_dir/<name>-<time>``).
+        out: Run directory (default ``recipe.out_dir/<name>-<time>``). One that already holds a run
+            is refused unless ``resume`` or ``overwrite`` is given; one process writes it at a time.
         device: Overrides ``recipe.train.device`` (``auto``, ``cpu``, ``cuda``).
-        resume: A run directory holding ``checkpoint.pt``: continue exactly where it stopped.
+        resume: True: continue the run in ``out`` exactly where it stopped (same recipe only; a
+            directory without a checkpoint starts afresh). A run directory: continue that run.
+        overwrite: Delete an earlier run in ``out`` first.
         max_steps: Stop (with a checkpoint) after this many steps in this call; None: run to the end.
         progress: Show a tqdm progress bar.
 
     Returns:
         :class:`RunResult`.
     """
-    payload = None
-    if resume is not None:
+    rank0 = int(os.environ.get("RANK", "0")) == 0
+    if rank0:
+        recipe, payload, out = open_run(recipe, out=out, resume=resume, overwrite=overwrite)
+    elif resume is not None and not isinstance(resume, bool):
         payload = load_checkpoint(resume)
         recipe, out = parse_train_recipe(payload["recipe"]), resume
-    if recipe is None:
-        raise ValueError("train() needs a recipe or a run directory to resume")
+    else:
+        ck = Path(out) / CHECKPOINT_NAME if out is not None and resume else None
+        payload = load_checkpoint(out) if ck is not None and ck.is_file() else None
+    with OutputLock(out, "gttnet train") if rank0 and out is not None else contextlib.nullcontext():
+        return _train(recipe, payload, out, device, max_steps, progress)
+
+
+def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, progress) -> RunResult:
+    """The body of :func:`train` once the run directory is decided (and locked)."""
     ctx, state = _prepare(recipe, payload, out, device)
     lengths = [_stage_length(s, ctx.steps_per_epoch) for s in recipe.stages]
     bar = tqdm(

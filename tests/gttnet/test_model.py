@@ -283,5 +283,5 @@ def test_missing_model_is_a_model_error(tmp_path, monkeypatch):
     with pytest.raises(ModelError, match="no trained model is available"):
         inference.load_model(tmp_path / "nope.pt")
     (tmp_path / "bad.pt").write_bytes(b"not a model")
-    with pytest.raises(ModelError, match="not a readable"):
+    with pytest.raises(ModelError, match="model card bad.json"):
         inference.load_model(tmp_path / "bad.pt")

@@ -1,0 +1,5 @@
+"""``python -m gttdata`` runs the gttdata CLI."""
+
+from gttdata.cli import main
+
+main()

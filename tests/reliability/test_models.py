@@ -1,0 +1,156 @@
+"""Items 2 and 4: model and checkpoint files are checked before use; a run is never overwritten silently."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from click.testing import CliRunner
+
+from gttnet.cli import main
+from gttnet.errors import ModelError
+from gttnet.model import inference
+from gttnet.model.network import build_model
+from gttnet.train.checkpoint import LoopState, load_checkpoint, save_checkpoint
+from tests.reliability.conftest import flip_byte, one_line_error
+
+
+def _model():
+    torch.manual_seed(0)
+    return build_model("gttnet_tiny", n_joints=5, k=6)
+
+
+@pytest.fixture
+def run_dir(tmp_path):
+    """A run directory with a real checkpoint (tiny model, Adam state, RNG states)."""
+    model = _model()
+    opt = torch.optim.Adam(model.parameters())
+    save_checkpoint(
+        tmp_path, model=model, optimizer=opt, state=LoopState(global_step=3), recipe={"name": "x"}
+    )
+    return tmp_path
+
+
+def test_bundled_model_card_holds_its_checksum():
+    card = json.loads(inference.BUNDLED_MODEL.with_suffix(".json").read_text())
+    assert len(card["sha256"]) == 64 and card["file"] == inference.BUNDLED_MODEL.name
+    assert inference.load_model(None).config.n_joints == card["config"]["n_joints"]
+
+
+def test_bitflipped_model_is_refused(tmp_path):
+    path = inference.save_model(tmp_path / "m.pt", _model(), card={"note": "t"})
+    inference.load_model(path)  # intact: loads
+    flip_byte(path)
+    with pytest.raises(ModelError, match=r"m.pt: sha256: expected .* found"):
+        inference.load_model(path)
+
+
+def test_bitflipped_model_on_the_cli_is_one_line(tmp_path, tiny_data):
+    torch.manual_seed(0)
+    path = inference.save_model(tmp_path / "m.pt", build_model("gttnet_tiny"))
+    flip_byte(path)
+    shard = str(tiny_data / "test/shard-00000.h5")
+    line = one_line_error(
+        CliRunner().invoke(main, ["reconstruct", shard, "--method", "gttnet", "--model", str(path)])
+    )
+    assert "m.pt" in line and ("sha256" in line or "expected" in line)
+
+
+def test_model_without_card_is_refused(tmp_path):
+    path = inference.save_model(tmp_path / "m.pt", _model())
+    path.with_suffix(".json").unlink()
+    with pytest.raises(ModelError, match="model card m.json"):
+        inference.load_model(path)
+
+
+def test_checkpoint_round_trip(run_dir):
+    assert load_checkpoint(run_dir)["state"].global_step == 3
+
+
+@pytest.mark.parametrize("damage", ["bitflip", "empty", "truncated", "garbage"])
+def test_damaged_checkpoint_never_resumes(run_dir, damage):
+    path = run_dir / "checkpoint.pt"
+    if damage == "bitflip":
+        flip_byte(path, path.stat().st_size - 200)
+    elif damage == "empty":
+        path.write_bytes(b"")
+    elif damage == "truncated":
+        path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    else:
+        path.write_bytes(b"\x80\x04garbage that is not a pickle" * 10)
+    with pytest.raises(ModelError, match=r"checkpoint.pt: .*expected"):
+        load_checkpoint(run_dir)
+    line = one_line_error(CliRunner().invoke(main, ["train", "--resume", str(run_dir)]))
+    assert "checkpoint.pt" in line and "expected" in line
+
+
+def test_damaged_checkpoint_as_model_is_refused(run_dir):
+    flip_byte(run_dir / "checkpoint.pt", (run_dir / "checkpoint.pt").stat().st_size - 100)
+    with pytest.raises(ModelError, match="sha256"):
+        inference.load_model(run_dir)
+
+
+def test_train_out_refuses_an_existing_run(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.pt").write_bytes(b"earlier model")
+    (run / "log.jsonl").write_text('{"kind": "meta"}\n')
+    line = one_line_error(
+        CliRunner().invoke(main, ["train", "recipes/gttnet/tiny.yaml", "--out", str(run), "--device", "cpu"])
+    )
+    assert str(run) in line and "--resume" in line and "--overwrite" in line
+    assert (run / "model.pt").read_bytes() == b"earlier model"
+    assert (run / "log.jsonl").read_text() == '{"kind": "meta"}\n'
+
+
+_OVER = ["data.sources=[{generate: recipes/gttdata/tiny.yaml, max_train: 1, max_val: 1}]",
+         "stages.0.steps=1", "stages.1.steps=1", "train.device=cpu"]  # fmt: skip
+
+
+def _interrupted_run(tmp_path):
+    from gttnet.train.loop import train
+    from gttnet.train.recipe import load_train_recipe
+
+    recipe = load_train_recipe("recipes/gttnet/tiny.yaml", _OVER)
+    train(recipe, out=tmp_path / "r", max_steps=1, progress=False)
+    return tmp_path / "r"
+
+
+def test_resume_refuses_a_run_of_another_recipe(tmp_path):
+    run = _interrupted_run(tmp_path)
+    line = one_line_error(
+        CliRunner().invoke(
+            main, ["train", "recipes/gttnet/tiny.yaml", *_OVER, "seed=5", "--out", str(run), "--resume"]
+        )  # fmt: skip
+    )
+    assert "another recipe" in line and "seed" in line
+
+
+@pytest.mark.slow
+def test_resume_continues_and_overwrite_replaces(tmp_path):
+    over = _OVER
+    _interrupted_run(tmp_path)
+    res = CliRunner().invoke(
+        main,
+        ["train", "recipes/gttnet/tiny.yaml", *over, "--out", str(tmp_path / "r"), "--resume", "--quiet"],
+    )
+    assert res.exit_code == 0 and "finished" in res.output, res.output
+    logs = [json.loads(x) for x in (tmp_path / "r/log.jsonl").read_text().splitlines()]
+    assert sum(r["kind"] == "meta" for r in logs) == 1  # one run, one log
+    res = CliRunner().invoke(
+        main,
+        [
+            "train",
+            "recipes/gttnet/tiny.yaml",
+            *over,
+            "seed=5",
+            "--out",
+            str(tmp_path / "r"),
+            "--overwrite",
+            "--quiet",
+        ],  # fmt: skip
+    )
+    assert res.exit_code == 0, res.output
+    logs = [json.loads(x) for x in (tmp_path / "r/log.jsonl").read_text().splitlines()]
+    assert [r["seed"] for r in logs if r["kind"] == "meta"] == [5]
