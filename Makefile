@@ -8,7 +8,7 @@ PIP := $(PYTHON) -m pip
 
 install:
 	$(PIP) install -q torch==2.13.0
-	$(PIP) install -q -e ".[train,preview,dev]"
+	$(PIP) install -q -e ".[train,preview,dev,formats]"
 
 system-deps:
 	bash scripts/system_deps.sh

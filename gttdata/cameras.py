@@ -61,8 +61,10 @@ class Camera:
         cam_from_world: Rigid world→camera transform, shape ``(4, 4)`` (see module docstring).
         image_size: ``(width, height)`` in pixels.
         name: Camera name.
-        dist: Distortion coefficients (OpenCV order k1, k2, p1, p2, k3), kept for rig files; the
-            simulator's cameras are distortion-free and ``project`` ignores them.
+        dist: Distortion coefficients (OpenCV order k1, k2, p1, p2, k3). ``project`` is the pinhole
+            projection and ignores them; the capture simulator distorts its images with them
+            (:func:`gttdata.calibration.distort_points`) and readers of real recordings undo them
+            (:func:`gttdata.calibration.undistort_points`).
     """
 
     K: np.ndarray

@@ -12,6 +12,8 @@ __all__ = [
     "OutputError",
     "PreviewDependencyError",
     "RendererUnavailableError",
+    "KeypointFormatError",
+    "CalibrationError",
 ]
 
 
@@ -50,3 +52,11 @@ class PreviewDependencyError(GttDataError):
 
 class RendererUnavailableError(GttDataError):
     """No offscreen OpenGL backend (EGL or OSMesa) can create a rendering context."""
+
+
+class KeypointFormatError(GttDataError):
+    """A 2-D detector output (OpenPose, DeepLabCut, SLEAP, COCO/MMPose) is malformed or inconsistent."""
+
+
+class CalibrationError(RigError):
+    """A calibration file is malformed, in unknown units, or disagrees with the keypoint sources."""

@@ -188,6 +188,13 @@ def _simulate(
     T = rig.cam_from_world[cam]
     size = np.array([c.image_size for c in rig.cameras], dtype=np.int32)
     gt_px, depth = project_images(points, K, T)
+    lens = [list(c.dist) for c in rig.cameras]
+    if np.any(np.asarray(lens, dtype=np.float64)):
+        from gttdata.calibration import distort_points
+
+        for v, c in enumerate(rig.cameras):  # images of a real lens: the pinhole points, distorted
+            sel = cam == v
+            gt_px[sel] = np.where((depth[sel] > 0)[..., None], distort_points(gt_px[sel], c), np.nan)
     noisy, outlier = add_detection_noise(
         gt_px,
         rng,
@@ -206,6 +213,8 @@ def _simulate(
         "n_outliers": int((outlier & visible).sum()),
         "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
     }
+    if np.any(np.asarray(lens, dtype=np.float64)):
+        meta["dist"] = lens
     if len(segments) > 1:
         meta["event_id"] = event.astype(int).tolist()
         meta["event_start_s"] = starts.tolist()

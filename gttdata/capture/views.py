@@ -35,8 +35,16 @@ class Observations:
         keypoints_px: 2-D joints, pixels, shape ``(N, J, 2)``; NaN where missing.
         visible: Observed-joint mask, shape ``(N, J)`` bool.
         image_size: ``(width, height)`` per camera, shape ``(V, 2)``.
-        stream_index: Index within the camera stream, shape ``(N,)``, or None.
+        stream_index: Index within the camera stream, shape ``(N,)``, or None. May skip values where a
+            camera dropped frames (a timestamp file says so).
         timestamp_s: Capture times, seconds, shape ``(N,)``, or None.
+        stream_time_s: Time of each image on its own camera's clock, seconds, shape ``(N,)``, or None:
+            known per-camera timing (``frame / fps`` or a per-frame timestamp file) whose offsets
+            between cameras are unknown. Allowed under ``partial`` and ``full`` (it is what clock
+            recovery starts from); never under ``none``.
+        confidence: Detector confidence of each joint in ``[0, 1]``, shape ``(N, J)``, or None (all
+            observed joints count fully). Solvers that weigh ray residuals use it as a per-observation
+            weight; joints below the caller's confidence threshold are already marked missing.
     """
 
     sequencing: str
@@ -49,6 +57,8 @@ class Observations:
     image_size: np.ndarray
     stream_index: np.ndarray | None = None
     timestamp_s: np.ndarray | None = None
+    stream_time_s: np.ndarray | None = None
+    confidence: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.sequencing not in SEQUENCING:
@@ -59,6 +69,18 @@ class Observations:
             raise ValueError("sequencing 'partial' needs stream_index and must not carry timestamp_s")
         if self.sequencing == "full" and self.timestamp_s is None:
             raise ValueError("sequencing 'full' needs timestamp_s")
+        if self.sequencing == "none" and self.stream_time_s is not None:
+            raise ValueError("sequencing 'none' must not carry stream_time_s")
+        n, j = np.shape(self.keypoints_px)[:2]
+        if self.stream_time_s is not None and np.shape(self.stream_time_s) != (n,):
+            raise ValueError(f"stream_time_s must have shape ({n},), got {np.shape(self.stream_time_s)}")
+        if self.confidence is not None and np.shape(self.confidence) != (n, j):
+            raise ValueError(f"confidence must have shape ({n}, {j}), got {np.shape(self.confidence)}")
+
+    def weights(self) -> np.ndarray:
+        """Per-observation weight, shape ``(N, J)``: the confidence where given, else 1; 0 where missing."""
+        w = np.ones(self.visible.shape) if self.confidence is None else np.nan_to_num(self.confidence)
+        return np.where(self.visible, np.clip(w, 0.0, 1.0), 0.0)
 
     @property
     def n_images(self) -> int:

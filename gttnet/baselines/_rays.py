@@ -7,17 +7,24 @@ import numpy as np
 __all__ = ["ray_projectors", "ray_residuals", "image_folds"]
 
 
-def ray_projectors(rays: np.ndarray, visible: np.ndarray) -> np.ndarray:
-    """Orthogonal projectors ``I - r r^T`` onto the plane normal to each observed ray.
+def ray_projectors(rays: np.ndarray, visible: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+    """Orthogonal projectors ``I - r r^T`` onto the plane normal to each observed ray, optionally weighted.
+
+    Since ``P`` is idempotent, ``w (X - C)^T P (X - C) = w ||P (X - C)||^2``: scaling a projector by an
+    observation's weight (e.g. its detector confidence) weighs that ray's squared residual in every
+    normal equation built from it.
 
     Args:
         rays: Unit viewing rays in world, shape ``(N, J, 3)``.
         visible: Observed-joint mask, shape ``(N, J)``.
+        weight: Per-observation weight, shape ``(N, J)``, or None (all 1).
 
     Returns:
         Projectors, shape ``(N, J, 3, 3)``; zero for missing joints (they constrain nothing).
     """
     P = np.eye(3) - rays[..., :, None] * rays[..., None, :]
+    if weight is not None:
+        P = P * np.asarray(weight, dtype=np.float64)[..., None, None]
     return np.where(visible[..., None, None], P, 0.0)
 
 

@@ -84,6 +84,7 @@ def fit_trajectory_basis(
     *,
     k: int,
     ridge: float = 1e-9,
+    weight: np.ndarray | None = None,
 ) -> np.ndarray:
     """Least-squares DCT trajectories through the observed rays.
 
@@ -94,12 +95,13 @@ def fit_trajectory_basis(
         visible: Observed-joint mask, shape ``(N, J)``.
         k: Number of DCT basis functions.
         ridge: Tikhonov weight on the coefficients (keeps poorly constrained high frequencies finite).
+        weight: Per-observation weight of each ray residual, shape ``(N, J)``, or None (all 1).
 
     Returns:
         Joints in world, metres, shape ``(N, J, 3)``.
     """
     theta = dct_basis(timestamp_s, k)
-    M, b = _normal_equations(theta, ray_projectors(rays, visible), centers)
+    M, b = _normal_equations(theta, ray_projectors(rays, visible, weight), centers)
     beta = _solve(M, b, k, ridge)
     return np.einsum("nk,jka->nja", theta, beta)
 
@@ -113,6 +115,7 @@ def _cross_validate(
     n_folds: int,
     ridge: float,
     patience: int = 2,
+    weight: np.ndarray | None = None,
 ) -> tuple[int, dict[int, float]]:
     """Basis size minimising the mean held-out ray distance (K-fold over images).
 
@@ -123,7 +126,7 @@ def _cross_validate(
     sizes = [k for k in BASIS_SIZES if 3 * k <= n] or [min(BASIS_SIZES[0], max(n // 3, 1))]
     tpos = np.argsort(np.argsort(timestamp_s, kind="stable"), kind="stable")
     theta = dct_basis(timestamp_s, max(sizes))
-    P = ray_projectors(rays, visible)
+    P = ray_projectors(rays, visible, weight)
     folds = []
     for held in image_folds(n, n_folds):
         test = np.isin(tpos, held)
@@ -167,12 +170,13 @@ def reconstruct_dct(
     """
     t = np.asarray(obs.timestamp_s, dtype=np.float64)
     centers, rays, vis = obs.centers(), obs.rays(), obs.visible
+    weight = None if obs.confidence is None else obs.weights()
     cv: dict[int, float] = {}
     if k is None:
-        k, cv = _cross_validate(t, centers, rays, vis, n_folds=n_folds, ridge=ridge)
+        k, cv = _cross_validate(t, centers, rays, vis, n_folds=n_folds, ridge=ridge, weight=weight)
     if k < 1:
         raise ValueError(f"dct: k must be >= 1, got {k}")
-    X = fit_trajectory_basis(t, centers, rays, vis, k=k, ridge=ridge)
+    X = fit_trajectory_basis(t, centers, rays, vis, k=k, ridge=ridge, weight=weight)
     A = temporal_chain_affinity(t)
     log.debug("dct: k=%d (cv %s)", k, cv)
     return Reconstruction(

@@ -1,0 +1,347 @@
+"""Calibration files of other tools, with explicit length units, lens distortion and a plausibility check.
+
+Two layouts are read into a :class:`gttdata.cameras.CameraRig` (metres, ``cam_from_world``):
+
+* **aniposelib / Pose2Sim TOML**: one table per camera with ``name``, ``size``, ``matrix``,
+  ``distortions``, ``rotation`` (Rodrigues vector, world→camera) and ``translation`` (world→camera, in
+  the calibration's length unit). The unit is taken from ``metadata.units`` when the file states it,
+  else from ``units=`` (``--calibration-units``), else detected: a rig whose cameras are more than
+  50 units apart on average was calibrated in millimetres (no real capture volume is 50 m wide), one
+  below that in metres. The detection is logged, never silent.
+* **EasyMocap / OpenCV** ``intri.yml`` + ``extri.yml`` (OpenCV FileStorage): ``names``, ``K_<name>``,
+  ``dist_<name>`` and ``R_<name>`` (Rodrigues) or ``Rot_<name>`` (matrix) with ``T_<name>``. EasyMocap
+  works in metres; ``units=`` overrides. Image sizes are read from ``H_<name>``/``W_<name>`` when
+  present, else taken as twice the principal point.
+
+:func:`check_rig` returns a one-line warning for a rig no real capture has: camera centres kilometres
+from the scene, or cameras that have the scene behind them. :func:`undistort_points` maps detected
+pixels to the pinhole image of the same intrinsics with OpenCV's ``undistortPoints``.
+"""
+
+from __future__ import annotations
+
+import logging
+import tomllib
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gttdata.cameras import Camera, CameraRig
+from gttdata.errors import CalibrationError, RigError
+
+__all__ = [
+    "CALIBRATION_UNITS",
+    "check_rig",
+    "distort_points",
+    "load_calibration",
+    "read_easymocap",
+    "read_toml_calibration",
+    "save_calibration",
+    "undistort_points",
+]
+
+log = logging.getLogger(__name__)
+
+#: Length units a calibration may be written in, in metres.
+CALIBRATION_UNITS: dict[str, float] = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+
+#: Mean distance between camera centres above which an unlabelled calibration is read as millimetres.
+MM_DETECT_SPREAD = 50.0
+
+
+def _centres(rig: CameraRig) -> np.ndarray:
+    return np.stack([c.center for c in rig.cameras])
+
+
+def _spread(centres: np.ndarray) -> float:
+    """Mean distance between camera centres (of the centres from their mean with one camera)."""
+    if centres.shape[0] < 2:
+        return float(np.linalg.norm(centres[0]))
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    return float(d.sum() / (centres.shape[0] * (centres.shape[0] - 1)))
+
+
+def _scaled(rig: CameraRig, scale: float) -> CameraRig:
+    cams = []
+    for c in rig.cameras:
+        T = c.cam_from_world.copy()
+        T[:3, 3] *= scale
+        cams.append(Camera(K=c.K, cam_from_world=T, image_size=c.image_size, name=c.name, dist=c.dist))
+    return CameraRig(tuple(cams))
+
+
+def _scene_point(rig: CameraRig) -> np.ndarray:
+    """Least-squares closest point to all optical axes, world, shape ``(3,)``."""
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for c in rig.cameras:
+        d = c.R[2]  # optical axis in world
+        P = np.eye(3) - np.outer(d, d)
+        A += P
+        b += P @ c.center
+    if np.linalg.cond(A) > 1e8:  # parallel axes: the centres' mean pushed one metre along the mean axis
+        return _centres(rig).mean(0) + np.mean([c.R[2] for c in rig.cameras], axis=0)
+    return np.linalg.solve(A, b)
+
+
+def check_rig(rig: CameraRig, *, units: str = "m", source: str = "calibration") -> str | None:
+    """A one-line warning for an implausible rig (in metres), or None when it looks like a real capture.
+
+    Flags camera centres more than 1 km from the scene (a millimetre file read as metres), a rig
+    smaller than 5 cm (a metre file read as millimetres), and cameras whose optical axis points away
+    from the scene point the axes converge on.
+    """
+    centres = _centres(rig)
+    spread = _spread(centres)
+    far = float(np.max(np.linalg.norm(centres, axis=1)))
+    if far > 1000.0 or spread > 1000.0:
+        hint = (
+            "is the calibration in millimetres? pass --calibration-units mm"
+            if units != "mm"
+            else ("check the translations")
+        )
+        return f"{source}: camera centres are up to {far / 1000:.1f} km from the origin ({spread:.0f} m apart); {hint}"
+    if len(rig) > 1 and spread < 0.05:
+        hint = (
+            "is the calibration in metres? pass --calibration-units m"
+            if units != "m"
+            else ("check the translations")
+        )
+        return f"{source}: cameras are only {spread * 1000:.1f} mm apart; {hint}"
+    if len(rig) > 1:
+        p = _scene_point(rig)
+        behind = [c.name for c in rig.cameras if float(c.R[2] @ (p - c.center)) <= 0]
+        if behind:
+            return (
+                f"{source}: camera(s) {', '.join(behind)} face away from the scene the other axes meet at "
+                f"{np.round(p, 2).tolist()} m; check the rotation convention (world->camera expected) and units"
+            )
+    return None
+
+
+def read_toml_calibration(path: str | Path, *, units: str | None = None) -> tuple[CameraRig, str]:
+    """Read an aniposelib / Pose2Sim TOML calibration; returns the rig in metres and the unit used.
+
+    Args:
+        path: The ``.toml`` file.
+        units: Length unit of the translations (key of :data:`CALIBRATION_UNITS`); None: the file's
+            ``metadata.units``, else detected from the rig's size.
+
+    Raises:
+        CalibrationError: Unparseable file, a missing field, or a unit that disagrees with the file.
+    """
+    path = Path(path)
+    try:
+        d = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{path}: cannot parse calibration TOML: {exc}") from exc
+    try:
+        rig = CameraRig.from_dict(d, source=str(path))
+    except RigError as exc:
+        raise CalibrationError(str(exc)) from exc
+    stated = (d.get("metadata") or {}).get("units")
+    if stated is not None and stated not in CALIBRATION_UNITS:
+        raise CalibrationError(
+            f"{path}: field 'metadata.units' must be one of {', '.join(CALIBRATION_UNITS)}, found {stated!r}"
+        )
+    if units is not None and units not in CALIBRATION_UNITS:
+        raise CalibrationError(
+            f"calibration units must be one of {', '.join(CALIBRATION_UNITS)}, got {units!r}"
+        )
+    if units is not None and stated is not None and units != stated:
+        raise CalibrationError(f"{path}: field 'metadata.units' says {stated!r} but {units!r} was given")
+    if units is None and stated is None:
+        spread = _spread(_centres(rig))
+        units = "mm" if spread > MM_DETECT_SPREAD else "m"
+        log.warning(
+            "%s: no metadata.units; cameras are %.4g units apart on average, read as %s "
+            "(pass --calibration-units to override)",
+            path,
+            spread,
+            units,
+        )
+    units = units or stated
+    return _scaled(rig, CALIBRATION_UNITS[units]), units
+
+
+def _fs_mat(fs: cv2.FileStorage, key: str, path: Path, required: bool = True) -> np.ndarray | None:
+    node = fs.getNode(key)
+    if node.empty():
+        if required:
+            raise CalibrationError(f"{path}: field {key!r} is missing")
+        return None
+    m = node.mat()
+    if m is None:
+        v = node.real()
+        return np.asarray([v], dtype=np.float64)
+    return np.asarray(m, dtype=np.float64)
+
+
+def _fs_names(fs: cv2.FileStorage, path: Path) -> list[str]:
+    node = fs.getNode("names")
+    if node.empty() or not node.isSeq():
+        raise CalibrationError(f"{path}: field 'names' (a list of camera names) is missing")
+    return [node.at(i).string() or str(int(node.at(i).real())) for i in range(node.size())]
+
+
+def read_easymocap(
+    intri: str | Path, extri: str | Path, *, units: str | None = None
+) -> tuple[CameraRig, str]:
+    """Read EasyMocap / OpenCV ``intri.yml`` + ``extri.yml``; returns the rig in metres and the unit.
+
+    Raises:
+        CalibrationError: A file that OpenCV cannot open, or a missing field (named with its file).
+    """
+    intri, extri = Path(intri), Path(extri)
+    units = units or "m"
+    if units not in CALIBRATION_UNITS:
+        raise CalibrationError(
+            f"calibration units must be one of {', '.join(CALIBRATION_UNITS)}, got {units!r}"
+        )
+    for p in (intri, extri):
+        if not p.is_file():
+            raise CalibrationError(f"{p}: calibration file not found")
+    fi = cv2.FileStorage(str(intri), cv2.FILE_STORAGE_READ)
+    fe = cv2.FileStorage(str(extri), cv2.FILE_STORAGE_READ)
+    if not fi.isOpened() or not fe.isOpened():
+        raise CalibrationError(f"{intri if not fi.isOpened() else extri}: OpenCV cannot read this YAML file")
+    names = _fs_names(fi, intri)
+    cams = []
+    for n in names:
+        K = _fs_mat(fi, f"K_{n}", intri)
+        dist = _fs_mat(fi, f"dist_{n}", intri, required=False)
+        rot = _fs_mat(fe, f"Rot_{n}", extri, required=False)
+        if rot is None:
+            rvec = _fs_mat(fe, f"R_{n}", extri)
+            rot, _ = cv2.Rodrigues(rvec.reshape(3, 1))
+        T = np.eye(4)
+        T[:3, :3] = rot.reshape(3, 3)
+        T[:3, 3] = _fs_mat(fe, f"T_{n}", extri).reshape(3) * CALIBRATION_UNITS[units]
+        if K is None or K.shape != (3, 3):
+            raise CalibrationError(
+                f"{intri}: field 'K_{n}' must be a 3x3 matrix, found {None if K is None else K.shape}"
+            )
+        h = _fs_mat(fi, f"H_{n}", intri, required=False)
+        w = _fs_mat(fi, f"W_{n}", intri, required=False)
+        size = (
+            (int(w.ravel()[0]), int(h.ravel()[0]))
+            if h is not None and w is not None
+            else (
+                int(round(2 * K[0, 2])),
+                int(round(2 * K[1, 2])),
+            )
+        )
+        d = tuple(np.zeros(5)) if dist is None else tuple(float(v) for v in dist.ravel())
+        try:
+            cams.append(Camera(K=K, cam_from_world=T, image_size=size, name=n, dist=d))
+        except RigError as exc:
+            raise CalibrationError(f"{intri}/{extri.name}: {exc}") from exc
+    fi.release()
+    fe.release()
+    return CameraRig(tuple(cams)), units
+
+
+def load_calibration(
+    path: str | Path, *, units: str | None = None, warn: bool = True
+) -> tuple[CameraRig, str]:
+    """Read a calibration by its name: a ``.toml`` file, an ``intri.yml`` (its ``extri.yml`` next to it)
+    or a folder holding ``intri.yml`` and ``extri.yml``. Logs :func:`check_rig`'s warning when ``warn``.
+
+    Returns:
+        ``(rig, units)``: cameras in metres and the unit the file was read in.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise CalibrationError(f"{path}: calibration file not found")
+    if path.is_dir() or path.name.startswith(("intri", "extri")):
+        folder = path if path.is_dir() else path.parent
+        rig, used = read_easymocap(folder / "intri.yml", folder / "extri.yml", units=units)
+    elif path.suffix.lower() == ".toml":
+        rig, used = read_toml_calibration(path, units=units)
+    else:
+        raise CalibrationError(
+            f"{path}: unknown calibration layout; expected .toml (aniposelib/Pose2Sim) or intri.yml/extri.yml"
+        )
+    if warn:
+        msg = check_rig(rig, units=used, source=str(path))
+        if msg:
+            log.warning(msg)
+    return rig, used
+
+
+def save_calibration(rig: CameraRig, path: str | Path, *, units: str = "m") -> Path:
+    """Write ``rig`` (metres) as an aniposelib / Pose2Sim TOML with translations in ``units``
+    (``metadata.units`` states it)."""
+    if units not in CALIBRATION_UNITS:
+        raise ValueError(f"units must be one of {', '.join(CALIBRATION_UNITS)}, got {units!r}")
+    import tomli_w
+
+    d = _scaled(rig, 1.0 / CALIBRATION_UNITS[units]).to_dict()
+    d["metadata"]["units"] = units
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(tomli_w.dumps(d))
+    tmp.replace(path)
+    return path
+
+
+def undistort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
+    """Detected pixels mapped to the distortion-free image of the same intrinsics.
+
+    Uses OpenCV's iterative ``undistortPoints`` run to convergence (OpenCV's distortion model: k1, k2, p1, p2[, k3,
+    ...]) with ``P = K``; NaN pixels stay NaN. Without distortion coefficients the input is returned.
+
+    Args:
+        pixels: Pixels, shape ``(..., 2)``.
+        camera: The camera (``K``, ``dist``).
+
+    Returns:
+        Undistorted pixels, shape ``(..., 2)``.
+    """
+    px = np.asarray(pixels, dtype=np.float64)
+    if not np.any(np.asarray(camera.dist)):
+        return px.copy()
+    flat = px.reshape(-1, 2)
+    ok = np.all(np.isfinite(flat), axis=1)
+    out = np.full_like(flat, np.nan)
+    if ok.any():
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+        src = flat[ok].reshape(-1, 1, 2)
+        dist = np.asarray(camera.dist, dtype=np.float64)
+        und = cv2.undistortPoints(src, camera.K, dist, None, None, camera.K, crit)
+        out[ok] = und.reshape(-1, 2)
+    return out.reshape(px.shape)
+
+
+def distort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
+    """Pinhole pixels mapped through the camera's lens distortion (inverse of :func:`undistort_points`).
+
+    Uses OpenCV's ``projectPoints`` on the normalised coordinates ``K^-1 [u, v, 1]``; NaN stays NaN.
+
+    Args:
+        pixels: Distortion-free pixels, shape ``(..., 2)``.
+        camera: The camera (``K``, ``dist``).
+
+    Returns:
+        Distorted pixels, shape ``(..., 2)``.
+    """
+    px = np.asarray(pixels, dtype=np.float64)
+    if not np.any(np.asarray(camera.dist)):
+        return px.copy()
+    flat = px.reshape(-1, 2)
+    ok = np.all(np.isfinite(flat), axis=1)
+    out = np.full_like(flat, np.nan)
+    if ok.any():
+        Kinv = np.linalg.inv(camera.K)
+        xn = np.concatenate([flat[ok], np.ones((int(ok.sum()), 1))], axis=1) @ Kinv.T
+        xn /= xn[:, 2:3]
+        proj, _ = cv2.projectPoints(
+            xn.reshape(-1, 1, 3),
+            np.zeros(3),
+            np.zeros(3),
+            camera.K,
+            np.asarray(camera.dist, dtype=np.float64),
+        )
+        out[ok] = proj.reshape(-1, 2)
+    return out.reshape(px.shape)

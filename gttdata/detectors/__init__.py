@@ -1,0 +1,268 @@
+"""2-D detector outputs (OpenPose, DeepLabCut, SLEAP, COCO/MMPose): one reader per format, in a registry.
+
+Every reader returns :class:`Keypoints2D`, the detections of ONE camera stream: pixel coordinates, a
+confidence per joint, the video frame number of each row and the joint names, nothing else. Which
+skeleton the names belong to, the calibration and the timing are attached later
+(:mod:`gttdata.recording`).
+
+``read_keypoints(path, fmt="auto")`` picks the format from the path: a folder of ``*.json`` files is
+OpenPose, ``.h5``/``.csv`` is DeepLabCut, ``.slp`` is SLEAP, a single ``.json`` file is COCO results or
+MMPose predictions. ``write_keypoints`` writes the OpenPose and DeepLabCut layouts (used by
+``gttdata export`` to turn a simulated capture into detector files).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gttdata.errors import KeypointFormatError
+
+__all__ = [
+    "FORMATS",
+    "KEYPOINT_SETS",
+    "Keypoints2D",
+    "KeypointFormat",
+    "detect_format",
+    "keypoint_set_for",
+    "read_keypoints",
+    "write_keypoints",
+]
+
+#: Joint names of the detector keypoint sets, in each detector's output order. OpenPose and COCO
+#: files carry no names, so the set is recognised by its joint count.
+KEYPOINT_SETS: dict[str, tuple[str, ...]] = {
+    "coco17": (
+        "nose",
+        "left_eye",
+        "right_eye",
+        "left_ear",
+        "right_ear",
+        "left_shoulder",
+        "right_shoulder",
+        "left_elbow",
+        "right_elbow",
+        "left_wrist",
+        "right_wrist",
+        "left_hip",
+        "right_hip",
+        "left_knee",
+        "right_knee",
+        "left_ankle",
+        "right_ankle",
+    ),  # fmt: skip
+    "body25": (
+        "nose",
+        "neck",
+        "right_shoulder",
+        "right_elbow",
+        "right_wrist",
+        "left_shoulder",
+        "left_elbow",
+        "left_wrist",
+        "mid_hip",
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "left_hip",
+        "left_knee",
+        "left_ankle",
+        "right_eye",
+        "left_eye",
+        "right_ear",
+        "left_ear",
+        "left_big_toe",
+        "left_small_toe",
+        "left_heel",
+        "right_big_toe",
+        "right_small_toe",
+        "right_heel",
+    ),  # fmt: skip
+    "halpe26": (
+        "nose",
+        "left_eye",
+        "right_eye",
+        "left_ear",
+        "right_ear",
+        "left_shoulder",
+        "right_shoulder",
+        "left_elbow",
+        "right_elbow",
+        "left_wrist",
+        "right_wrist",
+        "left_hip",
+        "right_hip",
+        "left_knee",
+        "right_knee",
+        "left_ankle",
+        "right_ankle",
+        "head",
+        "neck",
+        "hip",
+        "left_big_toe",
+        "right_big_toe",
+        "left_small_toe",
+        "right_small_toe",
+        "left_heel",
+        "right_heel",
+    ),  # fmt: skip
+}
+
+_SET_BY_COUNT = {len(v): k for k, v in KEYPOINT_SETS.items()}
+
+
+def keypoint_set_for(n_joints: int) -> tuple[str, tuple[str, ...]]:
+    """Keypoint set recognised from a joint count: ``(set name, joint names)``.
+
+    25 joints are Body-25, 17 are COCO-17, 26 are Halpe-26; any other count gives ``("", ("kp0", ...))``.
+    """
+    name = _SET_BY_COUNT.get(int(n_joints), "")
+    if name:
+        return name, KEYPOINT_SETS[name]
+    return "", tuple(f"kp{i}" for i in range(int(n_joints)))
+
+
+@dataclass(frozen=True)
+class Keypoints2D:
+    """The 2-D detections of one camera stream.
+
+    Args:
+        xy: Joint positions, pixels (origin at the top-left corner), shape ``(F, J, 2)`` float64; NaN
+            where the detector found nothing.
+        score: Detector confidence in ``[0, 1]``, shape ``(F, J)`` float64; NaN where nothing was found.
+        frame: Video frame number of each row, shape ``(F,)`` int64, strictly increasing (gaps are
+            frames without a file or row).
+        joint_names: Names of the J joints, in column order.
+        keypoint_set: Name of the detector keypoint set (a key of :data:`KEYPOINT_SETS`) or ``""``.
+        source: File or folder read, for messages.
+        fmt: Format name (a key of :data:`FORMATS`).
+    """
+
+    xy: np.ndarray
+    score: np.ndarray
+    frame: np.ndarray
+    joint_names: tuple[str, ...]
+    keypoint_set: str = ""
+    source: str = ""
+    fmt: str = ""
+
+    def __post_init__(self) -> None:
+        xy = np.asarray(self.xy, dtype=np.float64)
+        score = np.asarray(self.score, dtype=np.float64)
+        frame = np.asarray(self.frame, dtype=np.int64)
+        f, j = score.shape if score.ndim == 2 else (-1, -1)
+        if xy.shape != (f, j, 2) or frame.shape != (f,) or len(self.joint_names) != j:
+            raise KeypointFormatError(
+                f"{self.source}: inconsistent keypoints: xy {xy.shape}, score {score.shape}, frame "
+                f"{frame.shape}, {len(self.joint_names)} joint names"
+            )
+        if f > 1 and np.any(np.diff(frame) <= 0):
+            k = int(np.flatnonzero(np.diff(frame) <= 0)[0])
+            raise KeypointFormatError(
+                f"{self.source}: frame numbers must increase, found {frame[k]} then {frame[k + 1]}"
+            )
+        missing = ~np.all(np.isfinite(xy), axis=-1) | ~np.isfinite(score)
+        object.__setattr__(self, "xy", np.where(missing[..., None], np.nan, xy))
+        object.__setattr__(self, "score", np.where(missing, np.nan, score))
+        object.__setattr__(self, "frame", frame)
+        object.__setattr__(self, "joint_names", tuple(str(n) for n in self.joint_names))
+
+    @property
+    def n_frames(self) -> int:
+        """Number of rows F."""
+        return int(self.frame.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints J."""
+        return len(self.joint_names)
+
+
+@dataclass(frozen=True)
+class KeypointFormat:
+    """A registered detector format.
+
+    Args:
+        name: Registry name.
+        read: ``read(path) -> Keypoints2D``.
+        write: ``write(kp, path) -> Path`` or None when only reading is supported.
+        summary: One line for listings.
+    """
+
+    name: str
+    read: Callable[[Path], Keypoints2D]
+    write: Callable[[Keypoints2D, Path], Path] | None
+    summary: str
+
+
+def _registry() -> dict[str, KeypointFormat]:
+    from gttdata.detectors import coco, dlc, openpose, sleap
+
+    return {
+        "openpose": KeypointFormat(
+            "openpose", openpose.read_openpose, openpose.write_openpose, openpose.SUMMARY
+        ),
+        "dlc": KeypointFormat("dlc", dlc.read_dlc, dlc.write_dlc, dlc.SUMMARY),
+        "sleap": KeypointFormat("sleap", sleap.read_sleap, None, sleap.SUMMARY),
+        "coco": KeypointFormat("coco", coco.read_coco, coco.write_coco, coco.SUMMARY),
+    }
+
+
+#: Format names (``"auto"`` detects from the path).
+FORMATS: tuple[str, ...] = ("openpose", "dlc", "sleap", "coco")
+
+
+def detect_format(path: str | Path) -> str:
+    """Format of a keypoint source from its path.
+
+    A folder is OpenPose (one JSON per frame); ``.h5``/``.csv`` DeepLabCut; ``.slp`` SLEAP; ``.json``
+    COCO results or MMPose predictions.
+
+    Raises:
+        KeypointFormatError: When the path names no known layout.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return "openpose"
+    suffix = path.suffix.lower()
+    by_suffix = {".h5": "dlc", ".hdf5": "dlc", ".csv": "dlc", ".slp": "sleap", ".json": "coco"}
+    if suffix in by_suffix:
+        return by_suffix[suffix]
+    raise KeypointFormatError(
+        f"{path}: cannot tell the keypoint format from suffix {suffix!r}; expected a folder of OpenPose "
+        "JSON files, .h5/.csv (DeepLabCut), .slp (SLEAP) or .json (COCO/MMPose)"
+    )
+
+
+def read_keypoints(path: str | Path, fmt: str = "auto") -> Keypoints2D:
+    """Read one camera's 2-D detections.
+
+    Args:
+        path: A folder (OpenPose) or a file.
+        fmt: ``"auto"`` or a key of :data:`FORMATS`.
+
+    Raises:
+        FileNotFoundError: When the path does not exist.
+        KeypointFormatError: For a malformed file, with the file and field.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(2, "No such file or directory (keypoint source)", str(path))
+    fmt = detect_format(path) if fmt == "auto" else fmt
+    reg = _registry()
+    if fmt not in reg:
+        raise ValueError(f"unknown keypoint format {fmt!r}; expected auto or one of {', '.join(FORMATS)}")
+    return reg[fmt].read(path)
+
+
+def write_keypoints(kp: Keypoints2D, path: str | Path, fmt: str) -> Path:
+    """Write one camera's detections in ``fmt`` (``openpose``: a folder; ``dlc``: ``.h5`` or ``.csv``;
+    ``coco``: one ``.json`` results file)."""
+    reg = _registry()
+    if fmt not in reg or reg[fmt].write is None:
+        writable = ", ".join(k for k, v in reg.items() if v.write is not None)
+        raise ValueError(f"cannot write keypoint format {fmt!r}; writable: {writable}")
+    return reg[fmt].write(kp, Path(path))

@@ -1,0 +1,155 @@
+"""COCO keypoint results and MMPose predictions: one ``.json`` file per camera.
+
+Two layouts are read:
+
+* **COCO results** (what COCO-style evaluators and many detectors write): a list of
+  ``{"image_id": int, "keypoints": [x0, y0, s0, ...], "score": float}``, or a COCO dataset dict whose
+  ``"annotations"`` hold such entries. ``image_id`` is the frame number; ``s`` is the per-joint score
+  (a visibility flag 0/1/2 in ground-truth files, read as 0, 0.5, 1). Joints with ``s = 0`` are missing.
+* **MMPose predictions** (``--save-predictions``): ``{"meta_info": {...}, "instance_info": [{"frame_id":
+  int, "instances": [{"keypoints": [[x, y], ...], "keypoint_scores": [...]}]}]}``; joint names come
+  from ``meta_info.keypoint_id2name`` when present.
+
+With several detections in a frame the highest-scoring one is kept (one subject per capture).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from gttdata.detectors import Keypoints2D, keypoint_set_for
+from gttdata.errors import KeypointFormatError
+
+__all__ = ["SUMMARY", "read_coco", "write_coco"]
+
+SUMMARY = "COCO keypoint results or MMPose predictions, one .json per camera"
+
+
+def _coco_rows(path: Path, entries: list) -> dict[int, tuple[np.ndarray, np.ndarray, float]]:
+    best: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+    for i, e in enumerate(entries):
+        if not isinstance(e, dict) or "keypoints" not in e or "image_id" not in e:
+            raise KeypointFormatError(f"{path}: entry {i} needs fields 'image_id' and 'keypoints'")
+        try:
+            a = np.asarray(e["keypoints"], dtype=np.float64)
+            frame = int(e["image_id"])
+        except (TypeError, ValueError) as exc:
+            raise KeypointFormatError(f"{path}: entry {i} field 'keypoints' or 'image_id': {exc}") from exc
+        if a.ndim != 1 or a.size == 0 or a.size % 3:
+            raise KeypointFormatError(
+                f"{path}: entry {i} field 'keypoints' must be a flat list of 3*J numbers, found {a.shape}"
+            )
+        a = a.reshape(-1, 3)
+        s = a[:, 2]
+        if "score" not in e and np.all(np.isin(s, (0.0, 1.0, 2.0))):
+            s = s / 2.0  # ground-truth visibility flags
+        total = float(e.get("score", np.nansum(s)))
+        if frame not in best or total > best[frame][2]:
+            best[frame] = (a[:, :2], s, total)
+    return best
+
+
+def _mmpose_rows(path: Path, doc: dict) -> dict[int, tuple[np.ndarray, np.ndarray, float]]:
+    best: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+    for i, fr in enumerate(doc["instance_info"]):
+        if not isinstance(fr, dict) or "instances" not in fr:
+            raise KeypointFormatError(f"{path}: instance_info[{i}] needs field 'instances'")
+        frame = int(fr.get("frame_id", i))
+        for k, inst in enumerate(fr["instances"]):
+            try:
+                xy = np.asarray(inst["keypoints"], dtype=np.float64)
+                s = np.asarray(inst["keypoint_scores"], dtype=np.float64)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise KeypointFormatError(
+                    f"{path}: instance_info[{i}].instances[{k}] needs numeric 'keypoints' and "
+                    f"'keypoint_scores': {exc}"
+                ) from exc
+            if xy.ndim != 2 or xy.shape[1] != 2 or s.shape != (xy.shape[0],):
+                raise KeypointFormatError(
+                    f"{path}: instance_info[{i}].instances[{k}]: 'keypoints' must be (J, 2) and "
+                    f"'keypoint_scores' (J,), found {xy.shape} and {s.shape}"
+                )
+            total = float(np.nansum(s))
+            if frame not in best or total > best[frame][2]:
+                best[frame] = (xy, s, total)
+    return best
+
+
+def read_coco(path: Path) -> Keypoints2D:
+    """Read COCO keypoint results or MMPose predictions (one camera).
+
+    Raises:
+        KeypointFormatError: Unknown layout, missing fields, or joint counts that change.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise KeypointFormatError(f"{path}: not valid JSON: {exc}") from exc
+    names = None
+    if isinstance(doc, dict) and "instance_info" in doc:
+        rows = _mmpose_rows(path, doc)
+        id2name = (doc.get("meta_info") or {}).get("keypoint_id2name")
+        if isinstance(id2name, dict):
+            names = tuple(str(id2name[k]) for k in sorted(id2name, key=int))
+    elif isinstance(doc, dict) and isinstance(doc.get("annotations"), list):
+        rows = _coco_rows(path, doc["annotations"])
+    elif isinstance(doc, list):
+        rows = _coco_rows(path, doc)
+    else:
+        raise KeypointFormatError(
+            f"{path}: expected a COCO results list, a COCO dict with 'annotations', or MMPose predictions "
+            f"with 'instance_info'; found {type(doc).__name__}"
+        )
+    if not rows:
+        raise KeypointFormatError(f"{path}: no detections in the file")
+    frames = sorted(rows)
+    counts = {rows[f][0].shape[0] for f in frames}
+    if len(counts) != 1:
+        raise KeypointFormatError(f"{path}: field 'keypoints' has differing joint counts {sorted(counts)}")
+    j = counts.pop()
+    kset, default_names = keypoint_set_for(j)
+    if names is None or len(names) != j:
+        names = default_names
+    xy = np.stack([rows[f][0] for f in frames])
+    score = np.stack([rows[f][1] for f in frames])
+    found = score > 0
+    return Keypoints2D(
+        xy=np.where(found[..., None], xy, np.nan),
+        score=np.where(found, np.clip(score, 0.0, 1.0), np.nan),
+        frame=np.asarray(frames, dtype=np.int64),
+        joint_names=names,
+        keypoint_set=kset,
+        source=str(path),
+        fmt="coco",
+    )
+
+
+def write_coco(kp: Keypoints2D, path: Path) -> Path:
+    """Write ``kp`` as a COCO results list (``image_id`` = frame number; missing joints ``0, 0, 0``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    out = []
+    for f, xy, sc in zip(kp.frame.tolist(), kp.xy, kp.score, strict=True):
+        found = np.isfinite(sc)
+        if not found.any():
+            continue
+        flat = np.stack(
+            [np.where(found, xy[:, 0], 0.0), np.where(found, xy[:, 1], 0.0), np.where(found, sc, 0.0)], 1
+        )
+        out.append(
+            {
+                "image_id": f,
+                "category_id": 1,
+                "keypoints": flat.ravel().tolist(),
+                "score": float(np.mean(sc[found])),
+            }
+        )
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(out))
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,74 @@
+"""SLEAP ``.slp`` predictions, one file per camera, read through ``sleap-io``.
+
+``sleap-io`` installs from PyPI without torch but brings about 0.5 GB of dependencies (NWB, skia,
+an ffmpeg binary...), so it is an optional extra: ``pip install "gtt[sleap]"``. Without it the reader
+stops with one line saying so. The first video of the file is read; per frame the instance with the
+highest summed point score is kept (one subject per capture); user-labelled instances count with
+score 1.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gttdata.detectors import Keypoints2D
+from gttdata.errors import KeypointFormatError
+
+__all__ = ["SUMMARY", "read_sleap"]
+
+SUMMARY = "SLEAP .slp predictions, one per camera (needs the optional sleap-io: pip install 'gtt[sleap]')"
+
+
+def read_sleap(path: Path) -> Keypoints2D:
+    """Read SLEAP predictions (one camera) with ``sleap_io.load_slp``.
+
+    Raises:
+        KeypointFormatError: sleap-io missing, an unreadable file, or no labelled frames.
+    """
+    path = Path(path)
+    try:
+        import sleap_io as sio
+    except ModuleNotFoundError as exc:
+        raise KeypointFormatError(
+            f"{path}: reading SLEAP files needs sleap-io (pip install 'gtt[sleap]'); it is not installed"
+        ) from exc
+    try:
+        labels = sio.load_slp(str(path))
+    except Exception as exc:  # sleap-io raises many types for a bad file; one line names it
+        raise KeypointFormatError(f"{path}: sleap-io cannot read the file: {exc}") from exc
+    if not labels.skeletons or not labels.videos:
+        raise KeypointFormatError(f"{path}: the file has no skeleton or no video")
+    names = tuple(labels.skeletons[0].node_names)
+    video = labels.videos[0]
+    rows: dict[int, tuple[np.ndarray, float]] = {}
+    for lf in labels.labeled_frames:
+        if lf.video is not video:
+            continue
+        for inst in lf.instances:
+            if hasattr(inst, "score"):  # PredictedInstance: x, y, point score
+                a = np.asarray(inst.numpy(scores=True), dtype=np.float64)
+            else:
+                xy = np.asarray(inst.numpy(), dtype=np.float64)
+                a = np.concatenate([xy, np.where(np.isfinite(xy[:, :1]), 1.0, np.nan)], axis=1)
+            total = float(np.nansum(a[:, 2]))
+            f = int(lf.frame_idx)
+            if f not in rows or total > rows[f][1]:
+                rows[f] = (a, total)
+    if not rows:
+        raise KeypointFormatError(f"{path}: no labelled frames for video {video.filename!r}")
+    frames = sorted(rows)
+    a = np.stack([rows[f][0] for f in frames])
+    if a.shape[1] != len(names):
+        raise KeypointFormatError(
+            f"{path}: instances have {a.shape[1]} points, skeleton has {len(names)} nodes"
+        )
+    return Keypoints2D(
+        xy=a[..., :2],
+        score=np.clip(a[..., 2], 0.0, 1.0),
+        frame=np.asarray(frames, dtype=np.int64),
+        joint_names=names,
+        source=str(path),
+        fmt="sleap",
+    )

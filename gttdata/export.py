@@ -1,0 +1,167 @@
+"""Export a simulated capture as a real recording: detector files, a calibration, timestamps, a project file.
+
+``export_capture(sample, out)`` writes, for camera ``v`` named ``cam_<v>``:
+
+* its 2-D detections (``cam_<v>/`` OpenPose JSON files, or ``cam_<v>.csv``/``.h5`` DeepLabCut
+  predictions), one row per image in stream order with the frame number = the stream index;
+* ``cam_<v>_timestamps.csv``: each frame's time as ``ffprobe`` writes it (``frame,<seconds>``) on
+  the camera's own clock (its first frame at 0), or on the capture's clock with ``shared_clock``;
+
+plus ``calibration.toml`` (aniposelib / Pose2Sim layout, translations in ``units``, with the lens
+distortion the capture was simulated with), ``project.toml`` (every path above) and
+``ground_truth.npz`` (the 3-D joints per camera and frame, for scoring only).
+
+Confidences are realistic: a detector is less sure where it is wrong, so each score falls with the
+joint's actual pixel error ``e``: ``0.35 + 0.6 exp(-e^2 / (2 s^2))`` with ``s = 2.5 sigma + 0.5`` px,
+plus uniform jitter of +-0.03, clipped to ``[0.15, 0.99]`` (every observed joint stays above the
+default missing threshold 0.1, so a reconstruction of the export sees the same joints as one of the
+shard).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from gttdata.calibration import save_calibration
+from gttdata.cameras import Camera, CameraRig
+from gttdata.capture.sample import CaptureSample
+from gttdata.detectors import Keypoints2D, write_keypoints
+from gttdata.errors import GttDataError
+
+__all__ = ["EXPORT_FORMATS", "camera_rig_of", "export_capture", "realistic_confidence"]
+
+#: Detector layouts ``export_capture`` writes.
+EXPORT_FORMATS: tuple[str, ...] = ("openpose", "dlc")
+
+
+def realistic_confidence(sample: CaptureSample, rng: np.random.Generator) -> np.ndarray:
+    """Detector-like confidence of every joint, shape ``(N, J)`` (NaN where missing); see module docstring."""
+    err = np.linalg.norm(sample.keypoints_px.astype(np.float64) - sample.keypoints_gt_px, axis=-1)
+    sigma = float(sample.meta.get("capture", {}).get("sigma_px", 2.0) or 0.0)
+    s = 2.5 * sigma + 0.5
+    c = 0.35 + 0.6 * np.exp(-0.5 * (err / s) ** 2) + rng.uniform(-0.03, 0.03, size=err.shape)
+    return np.where(sample.visible, np.clip(c, 0.15, 0.99), np.nan)
+
+
+def camera_rig_of(sample: CaptureSample) -> CameraRig:
+    """The capture's cameras as a rig (``cam_<v>``), with the distortion it was simulated with.
+
+    Raises:
+        GttDataError: When a camera's pose changes between its images (a perturbed-camera variant has
+            no single calibration).
+    """
+    dist = sample.meta.get("dist") or [[0.0] * 5] * sample.n_cameras
+    cams = []
+    for v in range(sample.n_cameras):
+        idx = np.flatnonzero(sample.cam_id == v)
+        if idx.size == 0:
+            raise GttDataError(f"sample {sample.name!r}: camera {v} took no image; nothing to calibrate")
+        K, T = sample.K[idx], sample.cam_from_world[idx]
+        if np.abs(K - K[0]).max() > 0 or np.abs(T - T[0]).max() > 0:
+            raise GttDataError(
+                f"sample {sample.name!r}, variant {sample.variant!r}: camera {v} moves between images; "
+                "export the 'orig' variant"
+            )
+        size = tuple(int(x) for x in sample.image_size[v])
+        cams.append(
+            Camera(K=K[0], cam_from_world=T[0], image_size=size, name=f"cam_{v}", dist=tuple(dist[v]))
+        )
+    return CameraRig(tuple(cams))
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def export_capture(
+    sample: CaptureSample,
+    out: str | Path,
+    *,
+    fmt: str = "openpose",
+    units: str = "m",
+    shared_clock: bool = False,
+    seed: int = 0,
+    dlc_suffix: str = ".csv",
+    overwrite: bool = False,
+) -> Path:
+    """Write ``sample`` as detector files plus calibration, timestamps and a project file.
+
+    Args:
+        sample: The capture (metres, true time order).
+        out: Output folder (created).
+        fmt: One of :data:`EXPORT_FORMATS`.
+        units: Length unit of the calibration's translations (``m``, ``cm`` or ``mm``).
+        shared_clock: Timestamps on the capture's common clock (a synchronized rig) instead of each
+            camera's own clock.
+        seed: Seed of the confidence jitter.
+        dlc_suffix: ``.csv`` or ``.h5`` for DeepLabCut files.
+        overwrite: Replace an earlier export in ``out`` (else a non-empty ``out`` is an error).
+
+    Returns:
+        The project file path.
+
+    Raises:
+        GttDataError: ``out`` is not empty and ``overwrite`` is False.
+    """
+    if fmt not in EXPORT_FORMATS:
+        raise ValueError(f"format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
+    out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        if not overwrite:
+            raise GttDataError(f"{out}: output folder is not empty; pass --overwrite to replace its export")
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rig = camera_rig_of(sample)
+    save_calibration(rig, out / "calibration.toml", units=units)
+    conf = realistic_confidence(sample, np.random.default_rng(seed))
+    names = sample.skeleton.joint_names
+    cameras, gt_rows = [], {}
+    for v, cam in enumerate(rig.cameras):
+        idx = np.flatnonzero(sample.cam_id == v)
+        idx = idx[np.argsort(sample.stream_index[idx], kind="stable")]
+        frame = sample.stream_index[idx].astype(np.int64)
+        kp = Keypoints2D(
+            xy=np.where(sample.visible[idx][..., None], sample.keypoints_px[idx].astype(np.float64), np.nan),
+            score=conf[idx],
+            frame=frame,
+            joint_names=names,
+            source=cam.name,
+            fmt=fmt,
+        )
+        target = out / cam.name if fmt == "openpose" else out / f"{cam.name}{dlc_suffix}"
+        write_keypoints(kp, target, fmt)
+        t = sample.timestamp_s[idx]
+        t = t if shared_clock else t - t[0]
+        ts_path = out / f"{cam.name}_timestamps.csv"
+        _write_text(ts_path, "".join(f"frame,{x:.9f}\n" for x in t))
+        fps = sample.meta.get("capture", {}).get("fps_hz", [None] * sample.n_cameras)[v]
+        entry = {"name": cam.name, "keypoints": target.name, "timestamps": ts_path.name}
+        if fps:
+            entry["nominal_fps"] = float(fps)
+        cameras.append(entry)
+        gt_rows[cam.name] = (frame, sample.points3d[idx])
+    np.savez_compressed(
+        out / "ground_truth.npz",
+        **{f"{k}_frame": f for k, (f, _) in gt_rows.items()},
+        **{f"{k}_points3d": x for k, (_, x) in gt_rows.items()},
+    )
+    project = {
+        "calibration": "calibration.toml",
+        "calibration_units": units,
+        "clock": "shared" if shared_clock else "per-camera",
+        "min_confidence": 0.1,
+        "skeleton": "cmu31" if sample.skeleton.name == "cmu31" else sample.skeleton.to_dict(),
+        "ground_truth": "ground_truth.npz",
+        "source": f"gttdata export of {sample.name} ({sample.motion_name}), format {fmt}",
+        "cameras": cameras,
+    }
+    path = out / "project.toml"
+    _write_text(path, tomli_w.dumps(project))
+    return path
