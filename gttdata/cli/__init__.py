@@ -50,7 +50,7 @@ def main() -> None:
 
 def _register() -> None:
     """Attach subcommands; each module adds itself to ``main``. Missing modules are skipped."""
-    for mod in ("motions", "generate", "inspect", "verify", "preview"):
+    for mod in ("motions", "generate", "inspect", "verify", "preview", "export"):
         try:
             importlib_module = __import__(f"gttdata.cli.{mod}", fromlist=["register"])
         except ModuleNotFoundError as exc:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+from pathlib import Path
 
 import click
 import numpy as np
@@ -13,8 +15,6 @@ from gttdata.cli import friendly_errors
 __all__ = ["register", "reconstruct_cmd"]
 
 log = logging.getLogger(__name__)
-
-_METHODS = ("pseudo", "dloe", "dct", "hpf", "gttnet")
 
 
 def _report(loaded, rec) -> dict:
@@ -35,17 +35,205 @@ def _report(loaded, rec) -> dict:
     return out
 
 
+_PROJECT_SUFFIXES = (".toml", ".yaml", ".yml")
+
+
+def _method_default() -> str:
+    from gttnet.baselines.registry import available_methods
+
+    return "auto" if "auto" in available_methods() else "dloe"
+
+
+def _load_recording(spec, sequencing, min_confidence, seed):
+    """Recording view plus the ground truth an exported project names (scoring only)."""
+    from gttdata.recording import Recording, ground_truth_for
+
+    rec = Recording.load(spec)
+    view = rec.view(sequencing, min_confidence=min_confidence, seed=0 if seed is None else seed)
+    gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
+    return rec, view, gt
+
+
+def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json):
+    from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
+    from gttnet.io.output import write_reconstruction
+
+    table = motion_table(rec, view)
+    time_s = np.full(rec.n_images, np.nan)
+    if table.timed:
+        time_s[table.row] = table.time_s
+    order_rows = table.row.copy()
+    if resample_hz is not None:
+        table = resample(table, resample_hz)
+    for out in outs:
+        suffix = Path(out).suffix.lower()
+        if suffix in MOTION_SUFFIXES:
+            write_motion(table, out)
+        else:
+            write_reconstruction(
+                rec,
+                out,
+                image_index=image_index,
+                source=source,
+                extra={
+                    "cam_id": view.observations.cam_id.astype(np.int64),
+                    "frame": np.asarray(view.frame, dtype=np.int64),
+                    "time_s": time_s,
+                    "time_order": order_rows,
+                },
+                extra_attrs={
+                    "camera_names": json.dumps(list(view.camera_names)),
+                    "recording": recording_json,
+                },
+            )
+
+
+def _check_outs(out_paths, overwrite: bool) -> None:
+    for out in out_paths:
+        if Path(out).exists() and not overwrite:
+            raise click.ClickException(f"{out}: exists; pass --overwrite to replace it")
+        if Path(out).suffix.lower() not in (".trc", ".c3d", ".csv", ".h5", ".hdf5", ".npz"):
+            raise click.BadParameter(
+                f"{out}: suffix must be .trc, .c3d, .csv, .h5 or .npz", param_hint="--out"
+            )
+
+
+def _resolve_input(
+    input_paths,
+    *,
+    calibration,
+    keypoints,
+    fps,
+    timestamps,
+    clock,
+    calibration_units,
+    min_confidence,
+    fmt,
+    sample,
+    variant,
+    sequencing,
+    units,
+    seed,
+) -> dict:
+    """The run's input: a recording (calibration + keypoints, or a project file) or one INPUT file."""
+    is_project = (
+        calibration is None
+        and len(input_paths) == 1
+        and Path(input_paths[0]).suffix.lower() in _PROJECT_SUFFIXES
+    )
+    if calibration is not None or is_project or keypoints:
+        from gttdata.recording import load_project
+        from gttnet.io.recording_input import spec_from_options, spec_to_json
+
+        if is_project:
+            spec = load_project(input_paths[0])
+            if calibration_units is not None:
+                spec = dataclasses.replace(spec, calibration_units=calibration_units)
+        else:
+            if calibration is None:
+                raise click.UsageError("--keypoints needs --calibration (or give a project file as INPUT)")
+            spec = spec_from_options(
+                calibration,
+                list(keypoints) + list(input_paths),
+                fps=tuple(fps),
+                timestamps=tuple(timestamps),
+                clock=clock,
+                calibration_units=calibration_units,
+            )
+        if min_confidence is not None:
+            spec = dataclasses.replace(spec, min_confidence=min_confidence)
+        _, view, gt = _load_recording(spec, sequencing, min_confidence, seed)
+        return {
+            "loaded": None,
+            "view": view,
+            "gt": gt,
+            "source": str(spec.calibration),
+            "image_index": view.image_index,
+            "recording_json": spec_to_json(spec),
+        }
+    if len(input_paths) != 1:
+        raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
+    from gttnet.io import load_input
+    from gttnet.io.recording_input import view_of_loaded
+
+    try:
+        loaded = load_input(
+            input_paths[0],
+            fmt=fmt,
+            sequencing=sequencing,
+            sample=sample,
+            variant=variant,
+            units=units,
+            seed=seed,
+        )
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+    return {
+        "loaded": loaded,
+        "view": view_of_loaded(loaded),
+        "gt": None if loaded.ground_truth is None else loaded.ground_truth.points3d,
+        "source": loaded.source,
+        "image_index": loaded.image_index,
+        "recording_json": "",
+    }
+
+
 @click.command("reconstruct")
-@click.argument("input_path", metavar="INPUT", type=click.Path())
+@click.argument("input_paths", metavar="[INPUT]", nargs=-1, type=click.Path())
+@click.option(
+    "--calibration",
+    type=click.Path(),
+    default=None,
+    help="Calibration of a recording: aniposelib/Pose2Sim .toml, or EasyMocap intri.yml (extri.yml beside it).",
+)
+@click.option(
+    "--keypoints",
+    "keypoints",
+    multiple=True,
+    help="Keypoint source per camera: an OpenPose folder or a DeepLabCut .csv/.h5, SLEAP .slp or COCO/MMPose "
+    ".json file, as PATH (camera named after it) or NAME=PATH. Several may follow one --keypoints.",
+)
+@click.option(
+    "--fps",
+    type=float,
+    multiple=True,
+    help="Frame rate, Hz: once for every camera or once per camera, in order.",
+)
+@click.option(
+    "--timestamps",
+    type=click.Path(),
+    multiple=True,
+    help="Per-frame timestamp CSV (ffprobe output), once per camera, in the order of --keypoints.",
+)
+@click.option(
+    "--clock",
+    type=click.Choice(["per-camera", "shared"]),
+    default="per-camera",
+    show_default=True,
+    help="Whether the cameras' timestamps share one clock (shared: full sequencing).",
+)
+@click.option(
+    "--calibration-units",
+    type=click.Choice(["m", "cm", "mm"]),
+    default=None,
+    help="Length unit of the calibration's translations [default: the file's, else detected with a warning].",
+)
+@click.option(
+    "--min-confidence",
+    type=click.FloatRange(0.0, 1.0),
+    default=None,
+    help="Detections scoring below this are missing; the rest weigh by their score [default: project's, or 0.1].",
+)
 @click.option(
     "--format",
     "fmt",
     type=click.Choice(["auto", "h5", "dloe-mat", "gttnet-json"]),
     default="auto",
     show_default=True,
-    help="Input layout; auto picks it from the suffix (.h5, .mat, .json).",
+    help="Layout of a single INPUT file; auto picks it from the suffix (.h5, .mat, .json).",
 )
 @click.option(
+    "-s",
     "--sample",
     type=click.IntRange(min=0),
     default=0,
@@ -54,7 +242,10 @@ def _report(loaded, rec) -> dict:
 )
 @click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
 @click.option(
-    "--method", type=click.Choice(_METHODS), default="dloe", show_default=True, help="Reconstruction method."
+    "--method",
+    default=None,
+    help="Reconstruction method (see gttnet.baselines.registry.available_methods) [default: auto where "
+    "available, else dloe].",
 )
 @click.option(
     "--sequencing",
@@ -69,7 +260,19 @@ def _report(loaded, rec) -> dict:
     help="Length unit of a .mat/.json input, converted to metres [default: inch for those, m for shards].",
 )
 @click.option(
-    "--out", "out_path", type=click.Path(dir_okay=False), default=None, help="Write the result (.h5 or .npz)."
+    "--out",
+    "out_paths",
+    type=click.Path(dir_okay=False),
+    multiple=True,
+    help="Write the result; the suffix picks the layout: .trc, .c3d, .csv (time order), .h5, .npz. Repeatable.",
+)
+@click.option("--overwrite", is_flag=True, help="Replace existing --out files.")
+@click.option(
+    "--resample",
+    "resample_hz",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Interpolate .trc/.c3d/.csv outputs onto this uniform rate, Hz (needs times).",
 )
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object with the run's summary on stdout."
@@ -88,55 +291,120 @@ def _report(loaded, rec) -> dict:
 )
 @friendly_errors
 def reconstruct_cmd(
-    input_path, fmt, sample, variant, method, sequencing, units, out_path, as_json, model_path, seed, subjects
+    input_paths,
+    calibration,
+    keypoints,
+    fps,
+    timestamps,
+    clock,
+    calibration_units,
+    min_confidence,
+    fmt,
+    sample,
+    variant,
+    method,
+    sequencing,
+    units,
+    out_paths,
+    overwrite,
+    resample_hz,
+    as_json,
+    model_path,
+    seed,
+    subjects,
 ):
-    """Reconstruct the 3D joints of INPUT and recover the image order.
+    """Reconstruct the 3D joints of a recording or an INPUT file and recover the image order.
 
-    INPUT is a shard file (.h5), a dataset directory of shards, a DLOE demo file (.mat) or a GTT-Net
+    A recording is a calibration plus one 2-D keypoint source per camera (--calibration, --keypoints,
+    timing from --fps or --timestamps), or a project file (.toml/.yaml) listing them. INPUT may
+    instead be a shard file (.h5), a dataset directory of shards, a DLOE demo file (.mat) or a GTT-Net
     JSON file (.json).
 
     \b
-    Example:
-      gttnet reconstruct data/shard-00000.h5 --sample 3 --method dloe --sequencing partial \\
-          --out rec.h5 --json
+    Examples:
+      gttnet reconstruct --calibration rec/calibration.toml --keypoints rec/cam_0 rec/cam_1 rec/cam_2 --fps 30 --out result.trc
+      gttnet reconstruct rec/project.toml --method dloe --out result.c3d --out result.h5 --json
+      gttnet reconstruct data/shard-00000.h5 --sample 3 --method dloe --sequencing partial --out rec.h5
     """
     from gttnet.baselines.registry import check_sequencing, method_spec, reconstruct
-    from gttnet.io import load_input
-    from gttnet.io.output import write_reconstruction
 
+    method = method or _method_default()
     try:
-        spec = method_spec(method)
+        spec_m = method_spec(method)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--method") from exc
-    try:
-        loaded = load_input(
-            input_path, fmt=fmt, sequencing=sequencing, sample=sample, variant=variant, units=units, seed=seed
-        )
-    except ValueError as exc:
-        raise click.ClickException(str(exc)) from exc
-    check_sequencing(loaded.observations, spec)
+    _check_outs(out_paths, overwrite)
     options = {"model": model_path} if model_path is not None else {}
     if model_path is not None and method != "gttnet":
         raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
+    inp = _resolve_input(
+        input_paths,
+        calibration=calibration,
+        keypoints=keypoints,
+        fps=fps,
+        timestamps=timestamps,
+        clock=clock,
+        calibration_units=calibration_units,
+        min_confidence=min_confidence,
+        fmt=fmt,
+        sample=sample,
+        variant=variant,
+        sequencing=sequencing,
+        units=units,
+        seed=seed,
+    )
+    loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
+    check_sequencing(obs, spec_m)
     try:
         if subjects > 1:
+            if loaded is None:
+                raise click.UsageError("--subjects 2 applies to shard / .mat / .json inputs")
             from gttnet.apps.multi_subject import reconstruct_loaded_subjects
 
             rec, summary = reconstruct_loaded_subjects(
                 loaded, method=method, n_subjects=subjects, seed=seed or 0, **options
             )
         else:
-            rec = reconstruct(loaded.observations, method, **options)
-            summary = _report(loaded, rec)
+            rec = reconstruct(obs, method, **options)
+            summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
-    if out_path is not None:
-        write_reconstruction(rec, out_path, image_index=loaded.image_index, source=loaded.source)
+    if out_paths:
+        try:
+            _write_outputs(
+                rec,
+                view,
+                out_paths,
+                resample_hz,
+                image_index=inp["image_index"],
+                source=inp["source"],
+                recording_json=inp["recording_json"],
+            )
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from exc
     if as_json:
         click.echo(json.dumps(summary))
         return
     parts = [f"{k}={v}" for k, v in summary.items()]
-    click.echo(" ".join(parts) + (f" -> {out_path}" if out_path else ""))
+    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+
+
+def _report_recording(view, rec, gt_points) -> dict:
+    from gttnet.evaluate.metrics import mpjpe_mm
+
+    obs = view.observations
+    out = {
+        "method": rec.method,
+        "sequencing": rec.sequencing,
+        "n_images": rec.n_images,
+        "n_joints": rec.n_joints,
+        "n_cameras": len(view.camera_names),
+        "seconds": round(float(rec.seconds), 4),
+        "observed_fraction": round(float(obs.visible.mean()), 4),
+    }
+    if gt_points is not None:
+        out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt_points), 4)
+    return out
 
 
 def register(main: click.Group) -> None:

@@ -41,7 +41,13 @@ def _payload(rec: Reconstruction, image_index: np.ndarray | None) -> tuple[dict,
 
 
 def write_reconstruction(
-    rec: Reconstruction, path: str | Path, *, image_index: np.ndarray | None = None, source: str = ""
+    rec: Reconstruction,
+    path: str | Path,
+    *,
+    image_index: np.ndarray | None = None,
+    source: str = "",
+    extra: dict[str, np.ndarray] | None = None,
+    extra_attrs: dict[str, str] | None = None,
 ) -> Path:
     """Write a reconstruction; the suffix picks the container (``.h5``/``.hdf5`` or ``.npz``).
 
@@ -56,6 +62,10 @@ def write_reconstruction(
         path: Output file.
         image_index: Stored index of each image in the input file, shape ``(N,)`` (default: identity).
         source: Input file name, recorded as an attribute.
+        extra: More per-image arrays (recordings add ``cam_id`` (N,), ``frame`` (N,), ``time_s`` (N,)
+            seconds, NaN when unknown, and ``time_order`` (N,), the rows in time order).
+        extra_attrs: More string attributes (recordings add ``camera_names`` (JSON list) and
+            ``recording`` (the recording spec as JSON, which ``gttnet render`` reloads)).
 
     Returns:
         The path written.
@@ -66,6 +76,9 @@ def write_reconstruction(
         raise ValueError(f"{path}: output suffix must be .h5, .hdf5 or .npz, got {suffix!r}")
     arrays, attrs = _payload(rec, image_index)
     attrs["source"] = source
+    for k, v in (extra or {}).items():
+        arrays[k] = np.asarray(v)
+    attrs.update(extra_attrs or {})
     tmp = path.with_name(path.name + ".tmp")
     if suffix == ".npz":
         with open(tmp, "wb") as fh:
@@ -87,7 +100,7 @@ def read_reconstruction(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         ``(arrays, attrs)``: the datasets by name and the attributes (``info`` parsed from JSON).
     """
     path = Path(path)
-    names = ("points3d", "image_index", "affinity", "order")
+    names = ("points3d", "image_index", "affinity", "order", "cam_id", "frame", "time_s", "time_order")
     if path.suffix.lower() == ".npz":
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in names if k in z.files}
