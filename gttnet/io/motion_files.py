@@ -250,8 +250,9 @@ def _c3d_bytes(table: MotionTable) -> bytes:
         g.add_array("TIME_S", "time of each frame, s", _param_array(table.time_s.astype(np.float32)))
         idx = np.array([cams.index(c) if c else -1 for c in table.camera], dtype=np.int16)
         g.add_array("CAMERA", "camera index of each frame (-1: resampled)", _param_array(idx))
-    g.add_str("CAMERAS", "camera names, in index order", " ".join(cams) or "-")
-    g.add_str("TIMED", "1: times are clock times; 0: ranks", "1" if table.timed else "0")
+    names, width = c3d.Writer.pack_labels(cams or ["-"])
+    g.add_str("CAMERAS", "camera names, in index order", names, width, len(cams or ["-"]))
+    g.add_array("TIMED", "1: times are clock times; 0: ranks", np.array([int(table.timed)], dtype=np.int16))
     frames = []
     for k in range(table.n_rows):
         pts = np.zeros((len(table.joint_names), 5), dtype=np.float32)
