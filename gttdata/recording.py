@@ -365,6 +365,7 @@ class Recording:
         *,
         min_confidence: float | None = None,
         undistort: bool = True,
+        weights: bool = True,
         seed: int = 0,
     ) -> RecordingView:
         """Solver inputs of the recording.
@@ -377,6 +378,8 @@ class Recording:
             sequencing: ``none``, ``partial`` or ``full`` (None: :meth:`best_sequencing`).
             min_confidence: Missing threshold (None: the project's, default 0.1).
             undistort: Undo lens distortion (turn off only to measure what it costs).
+            weights: Pass the detector scores on as per-observation weights (``confidence``); False
+                keeps only the missing threshold.
             seed: Seed of the image shuffle under ``none``.
         """
         seq = sequencing or self.best_sequencing()
@@ -422,7 +425,7 @@ class Recording:
             stream_index=None if seq == "none" else frame[perm].astype(np.int64),
             timestamp_s=times[perm] if seq == "full" else None,
             stream_time_s=times[perm] if (timed and seq != "none") else None,
-            confidence=conf[perm],
+            confidence=conf[perm] if weights else None,
         )
         return RecordingView(
             observations=obs,

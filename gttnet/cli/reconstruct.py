@@ -44,12 +44,14 @@ def _method_default() -> str:
     return "auto" if "auto" in available_methods() else "dloe"
 
 
-def _load_recording(spec, sequencing, min_confidence, seed):
+def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
     """Recording view plus the ground truth an exported project names (scoring only)."""
     from gttdata.recording import Recording, ground_truth_for
 
     rec = Recording.load(spec)
-    view = rec.view(sequencing, min_confidence=min_confidence, seed=0 if seed is None else seed)
+    view = rec.view(
+        sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
+    )
     gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
     return rec, view, gt
 
@@ -88,6 +90,22 @@ def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recordi
             )
 
 
+def _timing_options(method: str, view) -> dict:
+    """Known per-camera timing for methods that take it (clock recovery: ``frame_times_s``, ``fps``)."""
+    import inspect
+
+    from gttnet.baselines.registry import method_spec
+
+    params = inspect.signature(method_spec(method).fn).parameters
+    obs, out = view.observations, {}
+    if "frame_times_s" in params and obs.stream_time_s is not None:
+        out["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
+    fps = np.asarray(view.fps, dtype=np.float64)
+    if "fps" in params and fps.size and np.all(np.isfinite(fps)):
+        out["fps"] = fps.tolist()
+    return out
+
+
 def _check_outs(out_paths, overwrite: bool) -> None:
     for out in out_paths:
         if Path(out).exists() and not overwrite:
@@ -100,6 +118,7 @@ def _check_outs(out_paths, overwrite: bool) -> None:
 
 def _resolve_input(
     input_paths,
+    weights,
     *,
     calibration,
     keypoints,
@@ -142,7 +161,7 @@ def _resolve_input(
             )
         if min_confidence is not None:
             spec = dataclasses.replace(spec, min_confidence=min_confidence)
-        _, view, gt = _load_recording(spec, sequencing, min_confidence, seed)
+        _, view, gt = _load_recording(spec, sequencing, min_confidence, seed, weights)
         return {
             "loaded": None,
             "view": view,
@@ -225,6 +244,12 @@ def _resolve_input(
     help="Detections scoring below this are missing; the rest weigh by their score [default: project's, or 0.1].",
 )
 @click.option(
+    "--weights/--no-weights",
+    default=True,
+    show_default=True,
+    help="Weigh each detection's ray residual by its confidence (recordings; DLOE pins rays, so only HPF/DCT use it).",
+)
+@click.option(
     "--format",
     "fmt",
     type=click.Choice(["auto", "h5", "dloe-mat", "gttnet-json"]),
@@ -299,6 +324,7 @@ def reconstruct_cmd(
     clock,
     calibration_units,
     min_confidence,
+    weights,
     fmt,
     sample,
     variant,
@@ -339,6 +365,7 @@ def reconstruct_cmd(
         raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
     inp = _resolve_input(
         input_paths,
+        weights,
         calibration=calibration,
         keypoints=keypoints,
         fps=fps,
@@ -365,7 +392,7 @@ def reconstruct_cmd(
                 loaded, method=method, n_subjects=subjects, seed=seed or 0, **options
             )
         else:
-            rec = reconstruct(obs, method, **options)
+            rec = reconstruct(obs, method, **_timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc

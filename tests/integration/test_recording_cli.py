@@ -76,6 +76,10 @@ def test_shared_clock_full_sequencing_times_and_resample(shard, tmp_path):
     trc, res_trc = tmp_path / "r.trc", tmp_path / "u.trc"
     got = _json(_reconstruct(project, "--method", "hpf", "--out", trc, "--json"))
     assert got["sequencing"] == "full"
+    # Without confidence weights the export is the shard's capture exactly.
+    unweighted = _json(_reconstruct(project, "--method", "hpf", "--no-weights", "--json"))
+    ref = _json(_reconstruct(shard, "--method", "hpf", "--sequencing", "full", "--json"))
+    assert unweighted["mpjpe_mm"] == pytest.approx(ref["mpjpe_mm"], rel=1e-6)
     with ShardReader(shard) as r:
         truth = r.read_sample(0)
     _, t, _, _ = read_trc(trc)
