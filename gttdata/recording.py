@@ -246,13 +246,22 @@ class RecordingView:
 
 
 def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> Skeleton:
+    """The keypoints' topology: a project's skeleton table or name, else the recognised keypoint set
+    (a ``gttdata.skeletons`` name), else CMU-31 by its names, else a star rooted at joint 0."""
+    from gttdata.skeletons import get_skeleton
+
     if isinstance(wanted, dict):
         sk = Skeleton.from_dict(wanted, source="project skeleton")
-    elif wanted == "cmu31" or (wanted is None and names == cmu31().joint_names):
-        sk = cmu31()
     else:
-        label = wanted or kset or f"detector{len(names)}"
-        return Skeleton(name=str(label), joint_names=names, parents=(-1,) + (0,) * (len(names) - 1))
+        name = wanted or kset or ("cmu31" if names == cmu31().joint_names else None)
+        if name is None:
+            return Skeleton(
+                name=f"detector{len(names)}", joint_names=names, parents=(-1,) + (0,) * (len(names) - 1)
+            )
+        try:
+            sk = get_skeleton(name)
+        except KeyError as exc:
+            raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
     if sk.n_joints != len(names):
         raise KeypointFormatError(
             f"skeleton {sk.name!r} has {sk.n_joints} joints but the keypoint sources have {len(names)}"

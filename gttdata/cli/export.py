@@ -67,8 +67,8 @@ def export_cmd(source, split, sample, variant, fmt, units, shared_clock, seed, o
 
     \b
     Examples:
-      gttdata export data/gttdata/default --sample 0 --format openpose --out rec
-      gttdata export data/gttdata/default --sample 2 --format dlc --units mm --out rec_dlc
+      gttdata export data/gttdata/tiny --split test --sample 0 --format openpose --units mm --out runs/recording
+      gttdata export data/gttdata/default --sample 2 --format dlc --shared-clock --out runs/recording_dlc
     """
     from gttdata.export import export_capture
 

@@ -32,84 +32,19 @@ __all__ = [
     "write_keypoints",
 ]
 
-#: Joint names of the detector keypoint sets, in each detector's output order. OpenPose and COCO
-#: files carry no names, so the set is recognised by its joint count.
-KEYPOINT_SETS: dict[str, tuple[str, ...]] = {
-    "coco17": (
-        "nose",
-        "left_eye",
-        "right_eye",
-        "left_ear",
-        "right_ear",
-        "left_shoulder",
-        "right_shoulder",
-        "left_elbow",
-        "right_elbow",
-        "left_wrist",
-        "right_wrist",
-        "left_hip",
-        "right_hip",
-        "left_knee",
-        "right_knee",
-        "left_ankle",
-        "right_ankle",
-    ),  # fmt: skip
-    "body25": (
-        "nose",
-        "neck",
-        "right_shoulder",
-        "right_elbow",
-        "right_wrist",
-        "left_shoulder",
-        "left_elbow",
-        "left_wrist",
-        "mid_hip",
-        "right_hip",
-        "right_knee",
-        "right_ankle",
-        "left_hip",
-        "left_knee",
-        "left_ankle",
-        "right_eye",
-        "left_eye",
-        "right_ear",
-        "left_ear",
-        "left_big_toe",
-        "left_small_toe",
-        "left_heel",
-        "right_big_toe",
-        "right_small_toe",
-        "right_heel",
-    ),  # fmt: skip
-    "halpe26": (
-        "nose",
-        "left_eye",
-        "right_eye",
-        "left_ear",
-        "right_ear",
-        "left_shoulder",
-        "right_shoulder",
-        "left_elbow",
-        "right_elbow",
-        "left_wrist",
-        "right_wrist",
-        "left_hip",
-        "right_hip",
-        "left_knee",
-        "right_knee",
-        "left_ankle",
-        "right_ankle",
-        "head",
-        "neck",
-        "hip",
-        "left_big_toe",
-        "right_big_toe",
-        "left_small_toe",
-        "right_small_toe",
-        "left_heel",
-        "right_heel",
-    ),  # fmt: skip
-}
+#: The detector keypoint sets a joint count identifies, as ``gttdata.skeletons`` names (OpenPose and
+#: COCO files carry no joint names): their joint names and order are those skeletons'.
+_DETECTOR_SETS: tuple[str, ...] = ("coco17", "body25", "halpe26")
+
+
+def _keypoint_sets() -> dict[str, tuple[str, ...]]:
+    from gttdata.skeletons import get_skeleton
+
+    return {k: get_skeleton(k).joint_names for k in _DETECTOR_SETS}
+
+
+#: Joint names of each detector keypoint set in the detector's output order (from ``gttdata.skeletons``).
+KEYPOINT_SETS: dict[str, tuple[str, ...]] = _keypoint_sets()
 
 _SET_BY_COUNT = {len(v): k for k, v in KEYPOINT_SETS.items()}
 
@@ -117,7 +52,8 @@ _SET_BY_COUNT = {len(v): k for k, v in KEYPOINT_SETS.items()}
 def keypoint_set_for(n_joints: int) -> tuple[str, tuple[str, ...]]:
     """Keypoint set recognised from a joint count: ``(set name, joint names)``.
 
-    25 joints are Body-25, 17 are COCO-17, 26 are Halpe-26; any other count gives ``("", ("kp0", ...))``.
+    25 joints are Body-25, 17 are COCO-17, 26 are Halpe-26 (the skeletons of ``gttdata.skeletons``); any
+    other count gives ``("", ("kp0", ...))``.
     """
     name = _SET_BY_COUNT.get(int(n_joints), "")
     if name:

@@ -344,13 +344,14 @@ def reconstruct_cmd(
     A recording is a calibration plus one 2-D keypoint source per camera (--calibration, --keypoints,
     timing from --fps or --timestamps), or a project file (.toml/.yaml) listing them. INPUT may
     instead be a shard file (.h5), a dataset directory of shards, a DLOE demo file (.mat) or a GTT-Net
-    JSON file (.json).
+    JSON file (.json). The recording examples read the export of the README's walk-through
+    (`gttdata export data/gttdata/tiny --split test --sample 0 --out runs/recording`).
 
     \b
     Examples:
-      gttnet reconstruct --calibration rec/calibration.toml --keypoints rec/cam_0 rec/cam_1 rec/cam_2 --fps 30 --out result.trc
-      gttnet reconstruct rec/project.toml --method dloe --out result.c3d --out result.h5 --json
-      gttnet reconstruct data/shard-00000.h5 --sample 3 --method dloe --sequencing partial --out rec.h5
+      gttnet reconstruct runs/recording/project.toml --method dloe --out runs/recording/result.c3d --out runs/recording/result.h5 --json
+      gttnet reconstruct --calibration runs/recording/calibration.toml --keypoints runs/recording/cam_0 runs/recording/cam_1 runs/recording/cam_2 --fps 10 --out runs/recording/result.trc
+      gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
     from gttnet.baselines.registry import check_sequencing, method_spec, reconstruct
 

@@ -78,8 +78,8 @@ def render_cmd(
 
     \b
     Examples:
-      gttnet render result.h5 --out result_render
-      gttnet render result.h5 --calibration rec/calibration.toml --keypoints rec/cam_0 rec/cam_1 rec/cam_2 --fps 30
+      gttnet render runs/recording/result.h5 --out runs/recording/render
+      gttnet render runs/recording/result.h5 --project runs/recording/project.toml --no-3d --json
     """
     from gttdata.recording import load_project
     from gttnet.apps.render import render_result

@@ -100,3 +100,16 @@ def test_yaml_project(tmp_path, sample):
     )
     view = Recording.load(load_project(tmp_path / "rec" / "p.yaml")).view()
     assert view.observations.n_images == sample.n_images and view.observations.sequencing == "partial"
+
+
+def test_detector_keypoint_set_maps_onto_its_skeleton(tmp_path, scene_factory):
+    from gttdata.skeletons import get_skeleton
+
+    seventeen = scene_factory(n_cameras=3, n_joints=17, frames_per_camera=4, seed=1)
+    spec = load_project(export_capture(seventeen, tmp_path / "rec", fmt="openpose"))
+    rec = Recording.load(dataclasses.replace(spec, skeleton=None))  # OpenPose files name no joints
+    assert rec.skeleton == get_skeleton("coco17") and len(rec.skeleton.bones) >= 16
+    with pytest.raises(
+        KeypointFormatError, match="skeleton 'body25' has 25 joints but the keypoint sources have 17"
+    ):
+        Recording.load(dataclasses.replace(spec, skeleton="body25"))
