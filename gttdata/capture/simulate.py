@@ -213,8 +213,6 @@ def _simulate(
         "n_outliers": int((outlier & visible).sum()),
         "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
     }
-    if np.any(np.asarray(lens, dtype=np.float64)):
-        meta["dist"] = lens
     if len(segments) > 1:
         meta["event_id"] = event.astype(int).tolist()
         meta["event_start_s"] = starts.tolist()
@@ -235,7 +233,7 @@ def _simulate(
         points3d=points,
         affinity_nbr=nbr,
         affinity_w=w,
-        meta=meta,
+        meta=meta | ({"dist": lens} if np.any(np.asarray(lens, dtype=np.float64)) else {}),
     )
 
 

@@ -69,13 +69,7 @@ def _banded_systems(P: np.ndarray, lam: float, order: int) -> np.ndarray:
 
 
 def fit_highpass(
-    centers: np.ndarray,
-    rays: np.ndarray,
-    visible: np.ndarray,
-    *,
-    lam: float,
-    order: int = 2,
-    weight: np.ndarray | None = None,
+    centers: np.ndarray, rays: np.ndarray, visible: np.ndarray, *, lam: float, order: int = 2
 ) -> np.ndarray:
     """Trajectories minimising ray residuals plus ``lam * ||G X_p||^2`` along an already ordered sequence.
 
@@ -85,13 +79,12 @@ def fit_highpass(
         visible: Observed-joint mask, shape ``(N, J)``.
         lam: Weight of the high-pass penalty (dimensionless).
         order: Difference order of the filter ``G``.
-        weight: Per-observation weight of each ray residual, shape ``(N, J)``, or None (all 1).
 
     Returns:
         Joints in world, metres, shape ``(N, J, 3)``, in the same (time) order.
     """
     n, J = visible.shape
-    P = ray_projectors(rays, visible, weight)
+    P = ray_projectors(rays, visible)
     ab = _banded_systems(P, lam, order)
     rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
     X = np.empty((n, J, 3))
@@ -101,13 +94,7 @@ def fit_highpass(
 
 
 def _cross_validate(
-    centers: np.ndarray,
-    rays: np.ndarray,
-    visible: np.ndarray,
-    *,
-    n_folds: int,
-    order: int,
-    weight: np.ndarray | None = None,
+    centers: np.ndarray, rays: np.ndarray, visible: np.ndarray, *, n_folds: int, order: int
 ) -> tuple[float, dict[float, float]]:
     """Prior weight minimising the mean held-out ray distance; held-out images keep only the prior."""
     n = visible.shape[0]
@@ -117,7 +104,7 @@ def _cross_validate(
         train_vis = visible.copy()
         train_vis[held] = False
         for lam in LAMBDAS:
-            X = fit_highpass(centers, rays, train_vis, lam=lam, order=order, weight=weight)
+            X = fit_highpass(centers, rays, train_vis, lam=lam, order=order)
             score[lam] += float(np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held])))
         count += int(visible[held].sum())
     cv = {lam: s / max(count, 1) for lam, s in score.items()}
@@ -158,14 +145,13 @@ def reconstruct_hpf(
     """
     seq = np.argsort(np.asarray(obs.timestamp_s), kind="stable")
     centers, rays, vis = obs.centers()[seq], obs.rays()[seq], obs.visible[seq]
-    weight = None if obs.confidence is None else obs.weights()[seq]
     cv: dict[float, float] = {}
     if lam is None:
-        lam, cv = _cross_validate(centers, rays, vis, n_folds=n_folds, order=order, weight=weight)
+        lam, cv = _cross_validate(centers, rays, vis, n_folds=n_folds, order=order)
     if not lam > 0:
         raise ValueError(f"hpf: lam must be > 0, got {lam}")
     X = np.empty((obs.n_images, obs.n_joints, 3))
-    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, weight=weight)
+    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order)
     log.debug("hpf: lam=%g", lam)
     return Reconstruction(
         points3d=X,

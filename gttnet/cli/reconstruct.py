@@ -247,7 +247,7 @@ def _resolve_input(
     "--weights/--no-weights",
     default=True,
     show_default=True,
-    help="Weigh each detection's ray residual by its confidence (recordings; DLOE pins rays, so only HPF/DCT use it).",
+    help="Weigh each detection's ray residual by its confidence (recordings; DLOE pins rays; the DCT solver uses it).",
 )
 @click.option(
     "--format",
