@@ -12,7 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from gttdata.augment import bone_scale, decorrelate, get_augmentation, mirror
+from gttdata.augment import (
+    bone_scale,
+    decorrelate,
+    get_augmentation,
+    joint_subset,
+    marker_offsets,
+    merge_joints,
+    mirror,
+)
 from gttdata.cameras import CameraRig, ring_rig
 from gttdata.capture.sample import CaptureSample
 from gttdata.capture.simulate import CaptureParams, merge_subjects, simulate_capture, simulate_events
@@ -109,10 +117,12 @@ def list_motions(recipe: GenerateRecipe, split: str) -> tuple[MotionRef, ...]:
     refs: list[MotionRef] = []
     for k, src in enumerate(_split(recipe, split).sources):
         if isinstance(src, ProceduralSource):
-            kinds = src.kinds or _procedural_kinds()
+            kinds = src.kinds or _procedural_kinds(src.skeleton)
+            # CMU-31 motions keep their historical names; other topologies name theirs.
+            prefix = "procedural" if src.skeleton == "cmu31" else f"procedural/{src.skeleton}"
             for m in range(src.count):
                 kind, seed = kinds[m % len(kinds)], src.seed + m
-                refs.append(MotionRef(f"procedural/{kind}/{seed:06d}", k, kind, seed))
+                refs.append(MotionRef(f"{prefix}/{kind}/{seed:06d}", k, kind, seed))
         else:
             for pattern in src.paths:
                 try:
@@ -146,24 +156,34 @@ def validate_inputs(recipe: GenerateRecipe) -> dict[str, int]:
     return counts
 
 
-def _procedural_kinds() -> tuple[str, ...]:
-    from gttdata.mocap.procedural import PROCEDURAL_KINDS
+def _procedural_kinds(skeleton: str = "cmu31") -> tuple[str, ...]:
+    from gttdata.mocap.procedural import kinds_for_skeleton
 
-    return tuple(PROCEDURAL_KINDS)
+    return tuple(kinds_for_skeleton(skeleton))
 
 
 @functools.lru_cache(maxsize=32)
-def _procedural_motion(kind: str, seed: int, duration_s: float, fps_hz: float) -> Motion:
-    from gttdata.mocap.procedural import generate_motion
+def _procedural_motion(
+    kind: str, seed: int, duration_s: float, fps_hz: float, skeleton: str = "cmu31"
+) -> Motion:
+    from gttdata.mocap.procedural import generate_skeleton_motion
 
-    return generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    return generate_skeleton_motion(skeleton, kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
 
 
 @functools.lru_cache(maxsize=64)
-def _file_motion(path: str, fmt: str) -> Motion:
+def _file_motion(path: str, fmt: str, skeleton: str = "native") -> Motion:
     from gttdata.mocap import load_motion
 
-    return load_motion(path, fmt=fmt)
+    motion = load_motion(path, fmt=fmt)
+    if skeleton == "native":
+        return motion
+    from gttdata.skeletons import derive_from_cmu31
+
+    try:
+        return derive_from_cmu31(motion, skeleton)
+    except ValueError as exc:
+        raise RecipeError(f"{path}: skeleton {skeleton!r}: {exc}") from None
 
 
 @functools.lru_cache(maxsize=8)
@@ -176,9 +196,9 @@ def _load(ref: MotionRef, src: ProceduralSource | FileSource) -> Motion:
     if isinstance(src, ProceduralSource):
         # The duration is a property of the motion, so it is drawn from the motion's own seed.
         dur = float(src.duration_s.draw(np.random.default_rng([src.seed, ref.seed, 0x6D6F74])))
-        motion = _procedural_motion(ref.kind, ref.seed, dur, src.fps_hz)
+        motion = _procedural_motion(ref.kind, ref.seed, dur, src.fps_hz, src.skeleton)
     else:
-        motion = _file_motion(ref.path, src.format)
+        motion = _file_motion(ref.path, src.format, src.skeleton)
     if src.trim_start_s or src.trim_end_s:
         motion = motion.trim(src.trim_start_s, motion.duration_s - src.trim_end_s)
     return motion
@@ -294,6 +314,9 @@ def _scene_motions(
         window = shortest
     maug = recipe.motion_augment
     records, events = [], []
+    # One topology draw per sample, shared by every event and subject (they are simulated as one).
+    topo = maug.joint_subset_prob or maug.merge_prob or maug.marker_prob
+    topo_seed = int(rng.integers(2**63)) if topo else None
     for e in range(n_events):
         subjects = []
         for s in range(scene.n_subjects):
@@ -315,6 +338,7 @@ def _scene_motions(
                     "decorrelated": m3.name.endswith("+decorrelated"),
                 }
             )
+        subjects = _topology(subjects, maug, topo_seed)
         if len(subjects) > 1:
             heading = rng.uniform(0.0, 2 * np.pi)
             sep = float(scene.subject_separation_m.draw(rng))
@@ -326,6 +350,23 @@ def _scene_motions(
         else:
             events.append(subjects[0])
     return events, window, records
+
+
+def _topology(motions: list[Motion], maug, seed: int | None) -> list[Motion]:
+    """The recipe's topology augmentations, drawn from ``seed``: the same map for every motion given.
+
+    ``seed`` is None when every probability is 0 (then nothing was drawn, so recipes without them
+    keep their shards).
+    """
+    if seed is None:
+        return motions
+    out = []
+    for m in motions:
+        r = np.random.default_rng(seed)
+        m = joint_subset(m, r, prob=maug.joint_subset_prob, min_keep=maug.joint_subset_min_keep)
+        m = merge_joints(m, r, prob=maug.merge_prob)
+        out.append(marker_offsets(m, r, prob=maug.marker_prob, max_frac=maug.marker_max_frac))
+    return out
 
 
 def build_sample(recipe: GenerateRecipe, split: str, index: int) -> list[CaptureSample]:

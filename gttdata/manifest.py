@@ -287,18 +287,23 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
         mine = [(e, a) for e, a in entries if e.split == split]
         _check_coverage(split, [e for e, _ in mine], expected.get(split))
         stats: dict = {}
+        skeletons: dict[str, int] = {}
         for e, a in mine:
             if tuple(a.get("variants") or ("orig",)) != variants and e.n_samples:
                 raise ManifestError(
                     f"{e.path}: variants: expected {list(variants)}, found {a.get('variants')}"
                 )
             stats = merge_stats(stats, a.get("stats") or {})
+            for name, count in (a.get("skeletons") or {}).items():  # schema >= 1.1
+                skeletons[name] = skeletons.get(name, 0) + int(count)
         total = merge_stats(total, stats)
         splits[split] = {
             "n_samples": sum(e.n_samples for e, _ in mine),
             "n_shards": len(mine),
             "statistics": summarise_stats(stats),
         }
+        if skeletons:
+            splits[split]["skeletons"] = dict(sorted(skeletons.items()))
     sha, dirty = git_revision()
     return Manifest(
         name=recipe.get("name") or name or root.resolve().name,

@@ -44,6 +44,7 @@ __all__ = [
     "SkeletonSpec",
     "VIRTUAL_RULES",
     "available_skeletons",
+    "base_skeleton_name",
     "derivable_from_cmu31",
     "derive_from_cmu31",
     "derive_positions",
@@ -177,6 +178,46 @@ def hand21() -> Skeleton:
 
 
 # ---------------------------------------------------------------------------------------------------
+# Animals
+# ---------------------------------------------------------------------------------------------------
+
+_Q_SPINE = ("pelvis", "spine1", "spine2", "spine3", "withers")
+_Q_NECK = ("neck1", "neck2", "head", "nose")
+_Q_TAIL = tuple(f"tail{k}" for k in range(1, 6))
+_Q_FRONT = ("shoulder", "elbow", "front_wrist", "front_paw", "front_toe")
+_Q_HIND = ("hip", "knee", "hock", "hind_paw", "hind_toe")
+
+QUADRUPED36_JOINTS: tuple[str, ...] = (
+    _Q_SPINE
+    + _Q_NECK
+    + ("left_ear", "right_ear")
+    + _Q_TAIL
+    + tuple(f"{s}_{n}" for s in ("left", "right") for n in _Q_FRONT)
+    + tuple(f"{s}_{n}" for s in ("left", "right") for n in _Q_HIND)
+)
+
+
+def quadruped36() -> Skeleton:
+    """A four-legged animal (dog-like), 36 joints, rooted at the pelvis.
+
+    Spine ``pelvis`` -> ``withers`` (5), neck and head ``neck1``, ``neck2``, ``head``, ``nose`` (4),
+    two ears, a tail of 5 joints from the pelvis, and per leg 5 joints: front ``shoulder``, ``elbow``,
+    ``front_wrist`` (carpus), ``front_paw``, ``front_toe`` from the withers; hind ``hip``, ``knee``
+    (stifle), ``hock``, ``hind_paw``, ``hind_toe`` from the pelvis.
+    """
+    chain = _Q_SPINE + _Q_NECK
+    e: dict[str, str | None] = {"pelvis": None}
+    e |= {c: p for p, c in zip(chain[:-1], chain[1:], strict=True)}
+    e |= {"left_ear": "head", "right_ear": "head", "tail1": "pelvis"}
+    e |= {c: p for p, c in zip(_Q_TAIL[:-1], _Q_TAIL[1:], strict=True)}
+    for s in ("left", "right"):
+        for names, base in ((_Q_FRONT, "withers"), (_Q_HIND, "pelvis")):
+            e[f"{s}_{names[0]}"] = base
+            e |= {f"{s}_{c}": f"{s}_{p}" for p, c in zip(names[:-1], names[1:], strict=True)}
+    return _tree("quadruped36", QUADRUPED36_JOINTS, e)
+
+
+# ---------------------------------------------------------------------------------------------------
 # Registry
 # ---------------------------------------------------------------------------------------------------
 
@@ -232,9 +273,17 @@ def get_skeleton(name: str) -> Skeleton:
     return skeleton_spec(name).build()
 
 
+def base_skeleton_name(name: str) -> str:
+    """The registered topology an augmented one came from: ``"coco17+subset"`` -> ``"coco17"``."""
+    return name.split("+", 1)[0]
+
+
 def skeleton_family(name: str) -> str | None:
-    """Family of a topology name, or None when it is not registered (e.g. a mocap file's own)."""
-    spec = _REGISTRY.get(_key(name))
+    """Family of a topology name (augmented names count as their base), or None when not registered.
+
+    A mocap file's own skeleton (e.g. C3D markers) is not registered: None.
+    """
+    spec = _REGISTRY.get(_key(base_skeleton_name(name)))
     return None if spec is None else spec.family
 
 
@@ -468,4 +517,10 @@ register_skeleton("coco17", "human", coco17, _HUMAN_SOURCE)
 register_skeleton("h36m17", "human", h36m17, _HUMAN_SOURCE)
 register_skeleton("body25", "human", body25, _HUMAN_SOURCE)
 register_skeleton("halpe26", "human", halpe26, _HUMAN_SOURCE)
-register_skeleton("hand21", "hand", hand21, "procedural hand (gttdata.mocap.procedural hand motions)")
+register_skeleton("hand21", "hand", hand21, "procedural hand (gttdata.mocap.procedural.generate_hand_motion)")
+register_skeleton(
+    "quadruped36",
+    "quadruped",
+    quadruped36,
+    "procedural quadruped (gttdata.mocap.procedural.generate_quadruped_motion)",
+)

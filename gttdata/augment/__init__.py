@@ -12,6 +12,7 @@ from gttdata.augment.registry import (
     register_augmentation,
     validate_augmentation,
 )
+from gttdata.augment.topology import joint_subset, marker_offsets, merge_joints
 
 __all__ = [
     "AUGMENT_LEVELS",
@@ -23,6 +24,9 @@ __all__ = [
     "decorrelate",
     "get_augmentation",
     "global_rotation",
+    "joint_subset",
+    "marker_offsets",
+    "merge_joints",
     "mirror",
     "register_augmentation",
     "validate_augmentation",

@@ -54,7 +54,14 @@ def _describe_dataset(root: Path) -> None:
         f"schema:    {m.schema_version}, written by {m.generator}, git {m.git_sha or '-'}{' (dirty)' if m.git_dirty else ''}"
     )
     click.echo(f"recipe:    hash {m.recipe_hash[:16]}, seed {m.seed}")
-    click.echo(f"skeleton:  {sk.get('name', '?')} ({len(sk.get('joint_names', ()))} joints)")
+    mixed: dict[str, int] = {}
+    for info in m.splits.values():
+        for name, count in (info.get("skeletons") or {}).items():
+            mixed[name] = mixed.get(name, 0) + count
+    if len(mixed) > 1:
+        click.echo("skeletons: " + ", ".join(f"{n} x{c}" for n, c in sorted(mixed.items())))
+    else:
+        click.echo(f"skeleton:  {sk.get('name', '?')} ({len(sk.get('joint_names', ()))} joints)")
     rig = m.rig or {}
     click.echo(
         f"rig:       {rig.get('kind', '?')}, " + ", ".join(f"{k} {v}" for k, v in rig.items() if k != "kind")

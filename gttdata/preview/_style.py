@@ -62,9 +62,17 @@ def joint_sides(skeleton: Skeleton) -> np.ndarray:
 
 
 def bone_sides(skeleton: Skeleton) -> np.ndarray:
-    """Side of each bone of ``skeleton.bones``: its child joint's side, shape ``(B,)`` int64."""
+    """Side of each drawn limb of ``skeleton.limbs`` (tree bones, then extra bones), shape ``(L,)`` int64.
+
+    A limb takes the side of its sided end; a limb joining a left and a right joint (COCO's
+    shoulder-to-shoulder) is on the midline.
+    """
+    limbs = skeleton.limbs
+    if not len(limbs):
+        return np.zeros(0, dtype=np.int64)
     sides = joint_sides(skeleton)
-    return sides[skeleton.bones[:, 0]] if len(skeleton.bones) else np.zeros(0, dtype=np.int64)
+    a, b = sides[limbs[:, 0]], sides[limbs[:, 1]]
+    return np.where(a == b, a, np.where(a == CENTRE, b, np.where(b == CENTRE, a, CENTRE)))
 
 
 def side_bgr_u8(side: int) -> tuple[int, int, int]:

@@ -137,7 +137,7 @@ def draw_overlay(
     vis = sample.visible[n] & np.isfinite(obs).all(axis=1)
     ok_gt = np.isfinite(gt).all(axis=1)
     sides = joint_sides(sample.skeleton)
-    for (a, b), side in zip(sample.skeleton.bones, bone_sides(sample.skeleton), strict=True):
+    for (a, b), side in zip(sample.skeleton.limbs, bone_sides(sample.skeleton), strict=True):
         if ok_gt[a] and ok_gt[b]:
             colour = tuple(int(c * 0.6) for c in side_bgr_u8(side))
             cv2.line(img, _fx(*gt[a]), _fx(*gt[b]), colour, thick, cv2.LINE_AA, _SHIFT)

@@ -143,7 +143,7 @@ def _skeleton_meshes(
             poses[:, :3, 3] = p[idx]
             meshes.append(pyrender.Mesh.from_trimesh(sphere, material=_material(pyrender, rgb), poses=poses))
         cyl = []
-        for (a, b), s in zip(skeleton.bones, bsides, strict=True):
+        for (a, b), s in zip(skeleton.limbs, bsides, strict=True):
             if s == side and ok[a] and ok[b] and np.linalg.norm(p[a] - p[b]) > 1e-6 and bone_radius_m > 0:
                 cyl.append(trimesh.creation.cylinder(radius=bone_radius_m, segment=(p[a], p[b]), sections=10))
         if cyl:
@@ -151,6 +151,16 @@ def _skeleton_meshes(
                 pyrender.Mesh.from_trimesh(trimesh.util.concatenate(cyl), material=_material(pyrender, rgb))
             )
     return meshes
+
+
+def _joint_radius(points3d: np.ndarray, skeleton: Skeleton) -> float:
+    """A sphere radius that suits the skeleton's size: a fifth of the median limb length, 4-35 mm."""
+    limbs = skeleton.limbs
+    if not len(limbs):
+        return 0.035
+    length = np.linalg.norm(points3d[limbs[:, 0]] - points3d[limbs[:, 1]], axis=-1)
+    length = length[np.isfinite(length) & (length > 1e-6)]
+    return float(np.clip(0.2 * np.median(length), 0.004, 0.035)) if len(length) else 0.035
 
 
 def _scaled(K: np.ndarray, image_size, scale: float) -> tuple[np.ndarray, int, int]:
@@ -170,8 +180,8 @@ def render_view(
     scale: float = 1.0,
     floor: bool = True,
     flat: bool = False,
-    joint_radius_m: float = 0.035,
-    bone_radius_m: float = 0.018,
+    joint_radius_m: float | None = None,
+    bone_radius_m: float | None = None,
 ) -> np.ndarray:
     """Render the skeleton (bones as cylinders, joints as spheres) on a floor grid from a pinhole camera.
 
@@ -186,8 +196,9 @@ def render_view(
         scale: Output resolution relative to ``image_size`` (the intrinsics are scaled to match).
         floor: Draw the z = 0 floor grid.
         flat: Unlit base colours (``RenderFlags.FLAT``) instead of a camera headlight.
-        joint_radius_m: Sphere radius, metres.
-        bone_radius_m: Cylinder radius, metres (0: no bones).
+        joint_radius_m: Sphere radius, metres; None: scaled to the skeleton (a fifth of its median limb
+            length, between 4 mm and 35 mm), so that a hand and a person both read well.
+        bone_radius_m: Cylinder radius, metres (0: no bones); None: half the joint radius.
 
     Returns:
         RGB image, shape ``(round(h * scale), round(w * scale), 3)`` uint8.
@@ -200,6 +211,10 @@ def render_view(
     trimesh = require("trimesh")
     scene = pyrender.Scene(bg_color=_BACKGROUND, ambient_light=(0.35, 0.35, 0.35))
     p = np.asarray(points3d, dtype=np.float64)
+    if joint_radius_m is None:
+        joint_radius_m = _joint_radius(p, skeleton)
+    if bone_radius_m is None:
+        bone_radius_m = 0.5 * joint_radius_m
     for mesh in _skeleton_meshes(
         pyrender, trimesh, p, skeleton, joint_radius_m=joint_radius_m, bone_radius_m=bone_radius_m
     ):

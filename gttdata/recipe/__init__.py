@@ -50,7 +50,7 @@ __all__ = [
 def _check_splits(recipe: GenerateRecipe, source: str) -> None:
     """Split names are unique and no motion (procedural seed or file path) is in two splits."""
     seen_names: set[str] = set()
-    seeds: list[tuple[int, int, str, str]] = []
+    seeds: list[tuple[int, int, str, str, str]] = []
     files: dict[str, str] = {}
     for s, split in enumerate(recipe.splits):
         if split.name in seen_names:
@@ -62,13 +62,14 @@ def _check_splits(recipe: GenerateRecipe, source: str) -> None:
             key = f"splits[{s}].sources[{k}]"
             if isinstance(src, ProceduralSource):
                 lo, hi = src.seed, src.seed + src.count - 1
-                for a, b, other, okey in seeds:
-                    if other != split.name and lo <= b and a <= hi:
+                gen = _generator(src.skeleton)
+                for a, b, other, okey, ogen in seeds:
+                    if other != split.name and ogen == gen and lo <= b and a <= hi:
                         raise RecipeError(
                             f"{source}: {key}.seed: expected procedural seeds disjoint from split {other!r} "
                             f"({okey}: seeds {a}..{b}), found seeds {lo}..{hi}"
                         )
-                seeds.append((lo, hi, split.name, key))
+                seeds.append((lo, hi, split.name, key, gen))
             else:
                 for p in src.paths:
                     norm = str(Path(p))
@@ -80,6 +81,48 @@ def _check_splits(recipe: GenerateRecipe, source: str) -> None:
                     files[norm] = split.name
 
 
+def _generator(skeleton: str) -> str:
+    """Which procedural generator makes a topology's motions (human keypoint sets share the human one)."""
+    from gttdata.skeletons import skeleton_family
+
+    return skeleton_family(skeleton) or skeleton
+
+
+def _check_skeletons(recipe: GenerateRecipe, source: str) -> None:
+    """Source topologies are registered and fit the source; one sample never mixes two topologies."""
+    from gttdata.skeletons import available_skeletons, derivable_from_cmu31, get_skeleton
+
+    ev = recipe.scene.n_events
+    multi = recipe.scene.n_subjects > 1 or ev.kind != "value" or ev.args[0] > 1
+    for s, split in enumerate(recipe.splits):
+        names = set()
+        for k, src in enumerate(split.sources):
+            key = f"splits[{s}].sources[{k}].skeleton"
+            if isinstance(src, FileSource) and src.skeleton == "native":
+                names.add("native")
+                continue
+            try:
+                name = get_skeleton(src.skeleton).name
+            except KeyError:
+                expected = (
+                    ("'native' or " if isinstance(src, FileSource) else "")
+                    + "one of "
+                    + ", ".join(available_skeletons())
+                )
+                raise RecipeError(f"{source}: {key}: expected {expected}, found {src.skeleton!r}") from None
+            if isinstance(src, FileSource) and name not in derivable_from_cmu31():
+                raise RecipeError(
+                    f"{source}: {key}: expected 'native' or a topology derived from CMU-31 files "
+                    f"({', '.join(derivable_from_cmu31())}), found {src.skeleton!r}"
+                )
+            names.add(name)
+        if multi and len(names) > 1:
+            raise RecipeError(
+                f"{source}: splits[{s}].sources: expected one skeleton per split when scene.n_events or "
+                f"scene.n_subjects > 1 (a sample holds one topology), found {', '.join(sorted(names))}"
+            )
+
+
 def _check_registered(recipe: GenerateRecipe, source: str) -> None:
     """Augmentation names and parameters are registered; procedural kinds exist (when that module is present)."""
     from gttdata.augment import validate_augmentation
@@ -88,17 +131,26 @@ def _check_registered(recipe: GenerateRecipe, source: str) -> None:
         problem = validate_augmentation(aug.name, aug.params, level="capture")
         if problem:
             raise RecipeError(f"{source}: augmentations[{i}].{problem}")
+    _check_skeletons(recipe, source)
     try:
-        from gttdata.mocap.procedural import PROCEDURAL_KINDS
+        from gttdata.mocap.procedural import kinds_for_skeleton
     except ImportError:  # the procedural module is optional at validation time
         return
     for s, split in enumerate(recipe.splits):
         for k, src in enumerate(split.sources):
-            for kind in getattr(src, "kinds", ()):
-                if kind not in PROCEDURAL_KINDS:
+            if not isinstance(src, ProceduralSource):
+                continue
+            allowed = kinds_for_skeleton(src.skeleton)
+            if not allowed:
+                raise RecipeError(
+                    f"{source}: splits[{s}].sources[{k}].skeleton: expected a topology with procedural "
+                    f"motions, found {src.skeleton!r} (it has none)"
+                )
+            for kind in src.kinds:
+                if kind not in allowed:
                     raise RecipeError(
                         f"{source}: splits[{s}].sources[{k}].kinds: expected kinds among "
-                        f"{', '.join(PROCEDURAL_KINDS)}, found {kind!r}"
+                        f"{', '.join(allowed)} (skeleton {src.skeleton!r}), found {kind!r}"
                     )
 
 

@@ -205,7 +205,13 @@ def to_plain(obj: object) -> object:
     if isinstance(obj, Param):
         return obj.to_yaml()
     if dataclasses.is_dataclass(obj):
-        return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        # Fields marked ``omit_default`` are left out at their default, so that adding such a field
+        # keeps the canonical form (and the hash) of every recipe that does not use it.
+        return {
+            f.name: to_plain(getattr(obj, f.name))
+            for f in dataclasses.fields(obj)
+            if not (f.metadata.get("omit_default") and getattr(obj, f.name) == f.default)
+        }
     if isinstance(obj, tuple | list):
         return [to_plain(x) for x in obj]
     if isinstance(obj, dict):

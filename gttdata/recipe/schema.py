@@ -69,6 +69,9 @@ class ProceduralSource:
         trim_end_s: Seconds cut from the end.
         window_s: Capture window length for this source (None: ``capture.window_s``).
         weight: Relative probability of drawing a sample's motion from this source.
+        skeleton: Registered topology of the motions (:mod:`gttdata.skeletons`): ``cmu31`` and the
+            human keypoint sets derived from it take the human kinds, ``hand21`` the hand kinds
+            (grasp, spread, point, wave), ``quadruped36`` the quadruped kinds (walk, trot, turn, sit).
     """
 
     kind: str = _f("procedural", choices=("procedural",))
@@ -81,6 +84,7 @@ class ProceduralSource:
     trim_end_s: float = _f(0.0, ge=0)
     window_s: Param | None = _f(None, gt=0, param=True)
     weight: float = _f(1.0, gt=0)
+    skeleton: str = _f("cmu31", omit_default=True)
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,8 @@ class FileSource:
         trim_end_s: Seconds cut from the end.
         window_s: Capture window length for this source (None: ``capture.window_s``).
         weight: Relative probability of drawing a sample's motion from this source.
+        skeleton: ``native`` keeps each file's own joints (e.g. a C3D clip's markers, as they are);
+            a human keypoint-set name (``coco17``...) derives it from CMU-31 files.
     """
 
     kind: str = _f("files", choices=("files",))
@@ -107,6 +113,7 @@ class FileSource:
     trim_end_s: float = _f(0.0, ge=0)
     window_s: Param | None = _f(None, gt=0, param=True)
     weight: float = _f(1.0, gt=0)
+    skeleton: str = _f("native", omit_default=True)
 
 
 @dataclass(frozen=True)
@@ -230,11 +237,24 @@ class MotionAugmentSpec:
         bone_scale: Factor applied to every bone length.
         decorrelate_prob: Probability of the "decorrelated motion" control: an independent random rigid
             motion per joint trajectory (:func:`gttdata.augment.decorrelate`).
+        joint_subset_prob: Probability of keeping a random subset of the joints
+            (:func:`gttdata.augment.joint_subset`), so that samples need not share a topology.
+        joint_subset_min_keep: Smallest fraction of joints a subset keeps.
+        merge_prob: Probability of merging random joints into their parents
+            (:func:`gttdata.augment.merge_joints`).
+        marker_prob: Probability of replacing joints by markers offset along their bones
+            (:func:`gttdata.augment.marker_offsets`).
+        marker_max_frac: Largest marker offset, as a fraction of the adjacent bone's length.
     """
 
     mirror_prob: float = _f(0.0, ge=0, le=1)
     bone_scale: Param = _p(1.0, gt=0)
     decorrelate_prob: float = _f(0.0, ge=0, le=1)
+    joint_subset_prob: float = _f(0.0, ge=0, le=1, omit_default=True)
+    joint_subset_min_keep: float = _f(0.5, gt=0, le=1, omit_default=True)
+    merge_prob: float = _f(0.0, ge=0, le=1, omit_default=True)
+    marker_prob: float = _f(0.0, ge=0, le=1, omit_default=True)
+    marker_max_frac: float = _f(0.25, ge=0, le=0.5, omit_default=True)
 
 
 @dataclass(frozen=True)

@@ -167,7 +167,7 @@ class ShardReader:
             for key in raw:
                 value = raw[key]
                 value = value.decode() if isinstance(value, bytes) else value
-                if key in ("variants", "stats", "recipe", "skeleton") and isinstance(value, str):
+                if key in ("variants", "stats", "recipe", "skeleton", "skeletons") and isinstance(value, str):
                     value = _attr_json(raw, key, str(self.path)) if value else None
                 elif isinstance(value, np.generic):
                     value = value.item()

@@ -27,7 +27,9 @@ __all__ = [
 ]
 
 #: Shard layout version ``MAJOR.MINOR``. Readers accept any minor of their major and refuse other majors.
-SCHEMA_VERSION = "1.0"
+#: 1.1 (from 1.0): root attribute ``skeletons``; a skeleton may carry ``extra_bones`` and parents that
+#: follow their children. 1.0 shards read unchanged.
+SCHEMA_VERSION = "1.1"
 
 #: Group holding one subgroup per sample, named by :func:`sample_group_name`.
 SAMPLES_GROUP = "samples"
@@ -114,6 +116,7 @@ ROOT_ATTRS: dict[str, str] = {
     "variants": "JSON list of variant names every sample holds, 'orig' first",
     "stats": "JSON statistics of the shard's original samples (see docs/FORMAT.md)",
     "skeleton": "JSON of the first sample's skeleton",
+    "skeletons": "JSON object: skeleton name -> number of samples (schema >= 1.1; a shard may mix topologies)",
 }
 
 #: Attributes of each ``samples/<index>`` group.

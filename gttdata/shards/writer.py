@@ -239,6 +239,7 @@ class ShardWriter:
         self._stats = merge_stats(self._stats, sample_stats(orig))
         if not self._skeleton:
             self._skeleton = _json(orig.skeleton.to_dict())
+        self._skeletons[orig.skeleton.name] = self._skeletons.get(orig.skeleton.name, 0) + 1
         self._n += 1
         self._next_sample += 1
         self._file.flush()
@@ -296,6 +297,7 @@ class ShardWriter:
         self._file = h5py.File(self._tmp, "w", libver=("v110", "v110"))
         _create_group(self._file, SAMPLES_GROUP)
         self._n, self._first, self._variants, self._stats, self._skeleton = 0, self._next_sample, None, {}, ""
+        self._skeletons: dict[str, int] = {}
 
     def _write_group(
         self, parent: h5py.Group, index: int, orig: CaptureSample, variants: list[CaptureSample]
@@ -331,6 +333,7 @@ class ShardWriter:
         f.attrs["variants"] = _json(self._variants or ["orig"])
         f.attrs["stats"] = _json(self._stats)
         f.attrs["skeleton"] = self._skeleton
+        f.attrs["skeletons"] = _json(self._skeletons)
         f.close()
         self._file = None
         trim_reserve(tmp)

@@ -84,7 +84,14 @@ def test_camera_perturbation_zero_is_identity(sample):
 
 def test_registry_lists_and_validates():
     assert set(available_augmentations("capture")) == {"global_rotation", "camera_perturbation"}
-    assert set(available_augmentations("motion")) == {"mirror", "bone_scale", "decorrelate"}
+    assert set(available_augmentations("motion")) == {
+        "mirror",
+        "bone_scale",
+        "decorrelate",
+        "joint_subset",
+        "merge_joints",
+        "marker_offsets",
+    }
     assert get_augmentation("global_rotation").fn is global_rotation
     with pytest.raises(KeyError, match="not registered"):
         get_augmentation("mirror", level="capture")

@@ -20,6 +20,7 @@ from gttdata.manifest import (
 )
 from gttdata.recipe import load_recipe
 from gttdata.shards.collection import DatasetReader
+from gttdata.shards.schema import SCHEMA_VERSION
 
 TINY = "recipes/gttdata/tiny.yaml"
 
@@ -44,7 +45,7 @@ def copy_root(tiny_root, tmp_path):
 
 def test_manifest_contents(tiny_root):
     m = load_manifest(tiny_root)
-    assert m.name == "tiny" and m.seed == 7 and m.schema_version == "1.0"
+    assert m.name == "tiny" and m.seed == 7 and m.schema_version == SCHEMA_VERSION
     assert list(m.splits) == ["train", "val", "test"]
     assert {k: v["n_samples"] for k, v in m.splits.items()} == {"train": 4, "val": 2, "test": 2}
     assert [e.path for e in m.shards_of("train")] == ["train/shard-00000.h5", "train/shard-00001.h5"]

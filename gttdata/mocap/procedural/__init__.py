@@ -1,4 +1,5 @@
-"""Built-in procedural motion source: seeded kinematic synthesis of human motion on the CMU-31 skeleton."""
+"""Built-in procedural motion sources: seeded kinematic synthesis of human motion on the CMU-31 skeleton
+(and the keypoint sets derived from it), of a hand (hand-21) and of a quadruped (quadruped36)."""
 
 from __future__ import annotations
 
@@ -13,11 +14,23 @@ from gttdata.mocap.procedural._body import Body, sample_body
 from gttdata.mocap.procedural._dance import dance_track
 from gttdata.mocap.procedural._gait import gait_track
 from gttdata.mocap.procedural._ground import place_on_ground
+from gttdata.mocap.procedural._hand import HAND_KINDS, generate_hand_motion
 from gttdata.mocap.procedural._mixed import mixed_track
+from gttdata.mocap.procedural._quadruped import QUADRUPED_KINDS, generate_quadruped_motion
 from gttdata.mocap.procedural._track import Track
 from gttdata.skeleton import cmu31
 
-__all__ = ["PROCEDURAL_KINDS", "generate_motion", "random_motion"]
+__all__ = [
+    "HAND_KINDS",
+    "PROCEDURAL_KINDS",
+    "QUADRUPED_KINDS",
+    "generate_hand_motion",
+    "generate_motion",
+    "generate_quadruped_motion",
+    "generate_skeleton_motion",
+    "kinds_for_skeleton",
+    "random_motion",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -189,3 +202,52 @@ def random_motion(
     # A stream separate from the one generate_motion uses, so the kind does not correlate with the body.
     kind = pool[int(np.random.default_rng([int(seed), 0x6B696E64]).integers(len(pool)))]
     return generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+
+
+def kinds_for_skeleton(skeleton: str) -> tuple[str, ...]:
+    """Procedural motion kinds available on a registered topology (empty when none).
+
+    Human topologies (CMU-31 and the keypoint sets derived from it) take :data:`PROCEDURAL_KINDS`,
+    ``hand21`` takes :data:`HAND_KINDS` and ``quadruped36`` :data:`QUADRUPED_KINDS`.
+    """
+    from gttdata.skeletons import derivable_from_cmu31, get_skeleton
+
+    name = get_skeleton(skeleton).name
+    if name in derivable_from_cmu31():
+        return PROCEDURAL_KINDS
+    return {"hand21": HAND_KINDS, "quadruped36": QUADRUPED_KINDS}.get(name, ())
+
+
+def generate_skeleton_motion(
+    skeleton: str, kind: str, *, seed: int, duration_s: float = 10.0, fps_hz: float = 120.0
+) -> Motion:
+    """One procedural motion on any topology that has a procedural source.
+
+    Human keypoint sets are the CMU-31 motion ``generate_motion(kind, seed=seed, ...)`` mapped by
+    :func:`gttdata.skeletons.derive_from_cmu31`, so ``coco17`` seed 5 is the same movement as
+    ``cmu31`` seed 5.
+
+    Args:
+        skeleton: A registered topology name with procedural kinds (:func:`kinds_for_skeleton`).
+        kind: One of ``kinds_for_skeleton(skeleton)``.
+        seed: Non-negative seed.
+        duration_s: Length in seconds.
+        fps_hz: Frame rate, Hz.
+
+    Raises:
+        ValueError: No procedural source for the topology, or a kind it does not have.
+    """
+    from gttdata.skeletons import derive_from_cmu31, get_skeleton
+
+    name = get_skeleton(skeleton).name
+    kinds = kinds_for_skeleton(name)
+    if kind not in kinds:
+        raise ValueError(
+            f"skeleton {name!r}: expected a procedural kind among {', '.join(kinds) or '(none)'}, found {kind!r}"
+        )
+    if name == "hand21":
+        return generate_hand_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    if name == "quadruped36":
+        return generate_quadruped_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    motion = generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    return motion if name == "cmu31" else derive_from_cmu31(motion, name)
