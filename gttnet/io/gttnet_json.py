@@ -1,17 +1,28 @@
-"""Importer of the GTT-Net JSON layout (per-image rays and centres, images in true time order)."""
+"""The GTT-Net JSON layout (per-image rays and centres, images in true time order): reader and writer.
+
+Two variants are read. Ours carries intrinsics ``K`` (3 x 3V). The authors' released test files carry
+the scalar ``K = 0`` and give the viewing rays directly, plus a time ``t`` per image, ``limbSeq``
+(the skeleton's limbs), ``X_init`` (their initial structure) and ``rayDInd`` (their neighbour
+ranking per image). :func:`write_gttnet_json` writes a capture in the authors' variant.
+"""
 
 from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
 
+from gttdata.skeleton import Skeleton
 from gttnet.errors import ImportFormatError
 from gttnet.io._views import UNITS, ImportedCapture, default_skeleton
 
-__all__ = ["read_gttnet_json", "rays_to_pixels"]
+__all__ = ["RAY_FOCAL_PX", "read_gttnet_json", "rays_to_pixels", "skeleton_from_limbs", "write_gttnet_json"]
+
+#: Focal length (pixels) of the synthetic intrinsics given to files that store rays without ``K``.
+RAY_FOCAL_PX = 1000.0
 
 log = logging.getLogger(__name__)
 
@@ -92,22 +103,151 @@ def rays_to_pixels(
     return px, R
 
 
-def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCapture:
-    """Read a GTT-Net JSON file.
+def skeleton_from_limbs(limbs: np.ndarray, n_joints: int) -> Skeleton:
+    """A skeleton for ``n_joints`` joints from an undirected limb list.
 
-    Layout (REFERENCE.md): ``camID`` (N camera ids, any integers: cameras are numbered by sorted id),
-    ``point3D`` (3P x N ground truth, joint-major rows), ``C`` (3 x N camera centres), ``K`` (3 x 3V,
-    camera c in columns 3c..3c+2) and ``ray`` (3P x N unit world rays; an all-zero ray is a missing
-    joint). Images are stored in true time order. Other keys (``A_GT``, ``rayDInd*``, ``X_init*``,
-    ``t``) are ignored. Rays become pixels through ``K`` and a synthetic rotation per camera
-    (:func:`rays_to_pixels`), so ``Observations.rays()`` returns the stored rays.
+    A registered topology (:mod:`gttdata.skeletons`) with the same joint count and the same limb set
+    is returned as is (so a COCO-17 or H36M-17 file gets its joint names). Otherwise the tree is a
+    breadth-first spanning forest from joint 0 (then from the lowest unreached joint), limbs that
+    would close a cycle become ``extra_bones``, and joints are named ``j0``, ``j1``...
+
+    Args:
+        limbs: 0-based joint index pairs, shape ``(L, 2)``.
+        n_joints: Number of joints J.
+    """
+    from gttdata.skeletons import available_skeletons, get_skeleton
+
+    want = {frozenset((int(a), int(b))) for a, b in limbs if a != b}
+    for name in available_skeletons():
+        sk = get_skeleton(name)
+        if sk.n_joints == n_joints and {frozenset(map(int, e)) for e in sk.limbs} == want:
+            return sk
+    adj: dict[int, list[int]] = {i: [] for i in range(n_joints)}
+    for e in sorted(tuple(sorted(e)) for e in want):
+        adj[e[0]].append(e[1])
+        adj[e[1]].append(e[0])
+    parents = [-2] * n_joints
+    for root in range(n_joints):
+        if parents[root] != -2:
+            continue
+        parents[root] = -1
+        queue = [root]
+        while queue:
+            i = queue.pop(0)
+            for k in adj[i]:
+                if parents[k] == -2:
+                    parents[k] = i
+                    queue.append(k)
+    tree = {frozenset((i, p)) for i, p in enumerate(parents) if p >= 0}
+    extra = tuple(tuple(sorted(e)) for e in sorted(tuple(sorted(e)) for e in want - tree))
+    return Skeleton(
+        name=f"limbs{n_joints}",
+        joint_names=tuple(f"j{i}" for i in range(n_joints)),
+        parents=tuple(parents),
+        mirror=tuple(range(n_joints)),
+        extra_bones=extra,
+    )
+
+
+def _limbs(path: Path, d: dict, p: int) -> np.ndarray | None:
+    """``limbSeq`` as 0-based pairs ``(L, 2)``, or None when absent.
+
+    Stored as L x 2 or 2 x L, 0-based or 1-based (OpenPose style): 1-based when no index is 0 and
+    the largest is P.
+    """
+    if "limbSeq" not in d:
+        return None
+    try:
+        a = np.asarray(d["limbSeq"], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ImportFormatError(f"{path}: field 'limbSeq': expected joint index pairs, found {exc}") from exc
+    if a.ndim != 2 or 2 not in a.shape or a.size == 0:
+        raise ImportFormatError(f"{path}: field 'limbSeq': expected shape (L, 2) or (2, L), found {a.shape}")
+    a = a if a.shape[1] == 2 else a.T
+    if not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
+        raise ImportFormatError(
+            f"{path}: field 'limbSeq': expected integer joint indices, found {a.ravel()[:4]}"
+        )
+    a = a.astype(np.int64)
+    if a.min() >= 1 and a.max() == p:
+        a = a - 1
+    if a.min() < 0 or a.max() >= p:
+        raise ImportFormatError(
+            f"{path}: field 'limbSeq': expected joint indices in [0, {p}) or [1, {p}] for P = {p} joints, "
+            f"found {a.min()}..{a.max()}"
+        )
+    return a
+
+
+def _camera_ids(path: Path, d: dict, n: int) -> np.ndarray:
+    """``camID`` per image: N ids, or V ids cycling over the N images (V dividing N)."""
+    cam_raw = _vector(path, d, "camID")
+    if cam_raw.shape[0] != n:
+        if cam_raw.shape[0] > n or n % cam_raw.shape[0]:
+            raise ImportFormatError(
+                f"{path}: field 'camID': expected N = {n} camera ids (one per image) or V ids cycling over "
+                f"the images (V dividing N), found {cam_raw.shape[0]}"
+            )
+        cam_raw = np.resize(cam_raw, n)
+    return cam_raw
+
+
+def _intrinsics(path: Path, d: dict, V: int) -> tuple[np.ndarray, bool]:
+    """Per-camera ``K`` (V, 3, 3) and whether the file gives rays only (``K`` = 0: synthetic K)."""
+    if "K" in d and np.size(d["K"]) == 1:
+        k0 = np.asarray(d["K"], dtype=object).ravel()[0]
+        if not isinstance(k0, int | float) or k0 != 0:
+            raise ImportFormatError(
+                f"{path}: field 'K': expected a (3, 3V) array or the scalar 0 (rays only), found {d['K']!r}"
+            )
+        f = RAY_FOCAL_PX
+        return np.tile(np.array([[f, 0.0, 0.0], [0.0, f, 0.0], [0.0, 0.0, 1.0]]), (V, 1, 1)), True
+    Kall = _array(path, d, "K", 2)
+    if Kall.shape != (3, 3 * V):
+        raise ImportFormatError(
+            f"{path}: field 'K': expected shape (3, 3V) = {(3, 3 * V)} for {V} cameras, found {Kall.shape}"
+        )
+    K = Kall.reshape(3, V, 3).transpose(1, 0, 2)
+    if np.any(np.abs(np.linalg.det(K)) < 1e-12):
+        raise ImportFormatError(
+            f"{path}: field 'K': expected non-singular 3 x 3 blocks, found a singular one"
+        )
+    return K, False
+
+
+def _time_rank(path: Path, d: dict, n: int) -> np.ndarray:
+    """Rank of each image in true time: from ``t`` when present, else the file order."""
+    if "t" not in d:
+        return np.arange(n, dtype=np.int64)
+    t = _vector(path, d, "t")
+    if t.shape[0] != n:
+        raise ImportFormatError(f"{path}: field 't': expected N = {n} capture times, found {t.shape[0]}")
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.argsort(t, kind="stable")] = np.arange(n)
+    return rank
+
+
+def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCapture:
+    """Read a GTT-Net JSON file (ours or the authors' variant).
+
+    Layout: ``ray`` (3P x N unit world rays, joint-major rows; an all-zero ray is a missing joint)
+    fixes N images and P joints. ``C`` (3 x N camera centres). ``camID``: the camera of each image,
+    any integers (cameras are numbered by sorted id); a list of V < N ids whose length divides N
+    means the images cycle over the cameras (image n has ``camID[n % V]``). ``K``: 3 x 3V
+    intrinsics (camera c in columns 3c..3c+2), or the scalar 0 when the file gives rays only (then
+    each camera gets synthetic intrinsics with focal :data:`RAY_FOCAL_PX`). Optional: ``point3D``
+    (3P x N ground truth), ``t`` (N capture times; the true order, otherwise the file order),
+    ``limbSeq`` (the skeleton: L limbs as joint index pairs, see :func:`skeleton_from_limbs`).
+    ``X_init``, ``rayDInd`` and ``A_GT`` are accepted and ignored: every method computes its own
+    initial structure and neighbours from the rays. Rays become pixels through ``K`` and a synthetic
+    rotation per camera (:func:`rays_to_pixels`), so ``Observations.rays()`` returns the stored rays.
 
     Args:
         path: The ``.json`` file.
         units: Length unit of ``C`` and ``point3D`` (key of :data:`gttnet.io._views.UNITS`).
 
     Returns:
-        The capture in file (time) order, with its time rank and ground truth.
+        The capture in time order, with its time rank and (when stored) ground truth.
 
     Raises:
         ImportFormatError: Naming the file, the field, what was expected and what was found.
@@ -124,64 +264,137 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
         raise ImportFormatError(f"{path}: expected UTF-8 JSON text, found binary data") from exc
     if not isinstance(d, dict):
         raise ImportFormatError(f"{path}: expected a JSON object, found {type(d).__name__}")
-    cam_raw = _vector(path, d, "camID")
-    n = cam_raw.shape[0]
     ray = _array(path, d, "ray", 2)
-    if ray.shape[1] != n or ray.shape[0] % 3 or ray.shape[0] == 0:
+    if ray.shape[0] % 3 or ray.shape[0] == 0 or ray.shape[1] == 0:
         raise ImportFormatError(
-            f"{path}: field 'ray': expected shape (3P, N) with N = {n}, found {ray.shape}"
+            f"{path}: field 'ray': expected shape (3P, N) with P, N > 0, found {ray.shape}"
         )
-    p = ray.shape[0] // 3
-    X = _array(path, d, "point3D", 2)
-    if X.shape != (3 * p, n):
-        raise ImportFormatError(
-            f"{path}: field 'point3D': expected shape (3P, N) = {(3 * p, n)}, found {X.shape}"
-        )
+    p, n = ray.shape[0] // 3, ray.shape[1]
+    cam_raw = _camera_ids(path, d, n)
+    X = None
+    if "point3D" in d:
+        X = _array(path, d, "point3D", 2)
+        if X.shape != (3 * p, n):
+            raise ImportFormatError(
+                f"{path}: field 'point3D': expected shape (3P, N) = {(3 * p, n)}, found {X.shape}"
+            )
     C = _array(path, d, "C", 2)
     if C.shape != (3, n):
         raise ImportFormatError(f"{path}: field 'C': expected shape (3, N) = {(3, n)}, found {C.shape}")
     ids, cam = np.unique(cam_raw, return_inverse=True)
     V = ids.shape[0]
-    Kall = _array(path, d, "K", 2)
-    if Kall.shape != (3, 3 * V):
-        raise ImportFormatError(
-            f"{path}: field 'K': expected shape (3, 3V) = {(3, 3 * V)} for {V} cameras, found {Kall.shape}"
-        )
-    K = Kall.reshape(3, V, 3).transpose(1, 0, 2)
-    if np.any(np.abs(np.linalg.det(K)) < 1e-12):
-        raise ImportFormatError(
-            f"{path}: field 'K': expected non-singular 3 x 3 blocks, found a singular one"
-        )
     rays = ray.reshape(p, 3, n).transpose(2, 0, 1)  # joint-major rows -> (N, P, 3)
     norm = np.linalg.norm(rays, axis=-1)
     visible = norm > 0
+    if not np.all(np.isfinite(rays)):
+        raise ImportFormatError(f"{path}: field 'ray': expected finite values, found NaN or inf")
     if np.any(np.abs(norm[visible] - 1.0) > 1e-3):
         bad = float(norm[visible][np.argmax(np.abs(norm[visible] - 1.0))])
         raise ImportFormatError(
             f"{path}: field 'ray': expected unit rays or all-zero (missing), found norm {bad:.4g}"
         )
+    K, rays_only = _intrinsics(path, d, V)
     try:
         px, R = rays_to_pixels(rays, visible, cam, K)
     except ValueError as exc:
         raise ImportFormatError(f"{path}: field 'ray': {exc}") from exc
+    if rays_only:
+        # Centre each synthetic image on its camera's pixels, and size it to hold them all.
+        size = np.empty((V, 2), dtype=np.int32)
+        for c in range(V):
+            sel = visible & (cam == c)[:, None]
+            half = np.abs(px[sel]).max(axis=0) if sel.any() else np.full(2, 1.0)
+            size[c] = 2 * np.ceil(half + 10.0)
+            K[c, :2, 2] = size[c] / 2.0
+        px = px + K[cam][:, None, :2, 2]
+    else:
+        size = np.round(2.0 * K[:, :2, 2]).astype(np.int32)
+    rank = _time_rank(path, d, n)
+    limbs = _limbs(path, d, p)
+    skeleton = default_skeleton(p) if limbs is None else skeleton_from_limbs(limbs, p)
     centres = C.T * scale
     T = np.tile(np.eye(4), (n, 1, 1))
     T[:, :3, :3] = R[cam]
     T[:, :3, 3] = -np.einsum("nab,nb->na", R[cam], centres)
     stream = np.zeros(n, dtype=np.int32)
     for c in range(V):
-        stream[cam == c] = np.arange(int(np.count_nonzero(cam == c)))
-    log.info("%s: %d images, %d joints, %d cameras (units %s)", path, n, p, V, units)
+        mine = np.flatnonzero(cam == c)
+        stream[mine[np.argsort(rank[mine], kind="stable")]] = np.arange(mine.shape[0])
+    log.info(
+        "%s: %d images, %d joints (%s), %d cameras (units %s%s)",
+        path, n, p, skeleton.name, V, units, ", rays only" if rays_only else "",
+    )  # fmt: skip
     return ImportedCapture(
         source=str(path),
-        skeleton=default_skeleton(p),
+        skeleton=skeleton,
         cam_id=cam.astype(np.int32),
         stream_index=stream,
         K=K[cam],
         cam_from_world=T,
         keypoints_px=px,
         visible=visible,
-        image_size=np.round(2.0 * K[:, :2, 2]).astype(np.int32),
-        time_rank=np.arange(n, dtype=np.int64),
-        points3d=X.reshape(p, 3, n).transpose(2, 0, 1) * scale,
+        image_size=size,
+        time_rank=rank,
+        points3d=None if X is None else X.reshape(p, 3, n).transpose(2, 0, 1) * scale,
     )
+
+
+def write_gttnet_json(
+    sample,
+    path: str | Path,
+    *,
+    units: str = "inch",
+    n_ranked: int = 20,
+    overwrite: bool = False,
+) -> Path:
+    """Write a capture in the authors' GTT-Net JSON layout (rays only, ``K`` = 0).
+
+    Images are written in true time order with ``camID`` (1-based), ``t`` (seconds), ``C``, ``ray``,
+    ``point3D`` (the ground truth), ``limbSeq`` (1-based limb pairs), ``X_init`` and ``rayDInd``
+    (pseudo-triangulation's initial structure and its ``n_ranked`` best neighbours per image, 1-based).
+    :func:`read_gttnet_json` reads it back to the same rays, centres, order and ground truth.
+
+    Args:
+        sample: A :class:`gttdata.capture.sample.CaptureSample` (true time order, ground truth).
+        path: Output ``.json``; written to a temporary name, then renamed.
+        units: Length unit of ``C``, ``point3D`` and ``X_init`` (key of ``UNITS``).
+        n_ranked: Neighbours per image in ``rayDInd``.
+        overwrite: Replace an existing file.
+
+    Returns:
+        The path written.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+    """
+    from gttdata.capture.views import make_view
+    from gttnet.geometry.triangulation import pseudo_triangulate
+
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    scale = UNITS[units]
+    obs, gt = make_view(sample, "full")
+    n, p = obs.keypoints_px.shape[:2]
+    rays, centres = obs.rays(), obs.centers()
+    pt = pseudo_triangulate(centres, rays, obs.visible, obs.cam_id)
+
+    def joint_major(a: np.ndarray) -> list:
+        return a.transpose(1, 2, 0).reshape(3 * p, n).tolist()  # (N, P, 3) -> (3P, N)
+
+    limbs = obs.skeleton.limbs + 1
+    d = {
+        "camID": (obs.cam_id.astype(np.int64) + 1).tolist(),
+        "t": gt.timestamp_s.tolist(),
+        "K": 0,
+        "C": (centres.T / scale).tolist(),
+        "ray": joint_major(rays),
+        "point3D": joint_major(gt.points3d / scale),
+        "limbSeq": limbs.tolist(),
+        "X_init": joint_major(pt.X_init / scale),
+        "rayDInd": (pt.order[:, : min(n_ranked, n)] + 1).tolist(),
+    }
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(d))
+    os.replace(tmp, path)
+    return path
