@@ -18,6 +18,8 @@ from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
     "BUNDLED_MODEL",
+    "BUNDLED_POINTNET_MODEL",
+    "bundled_model_for",
     "MODEL_FORMAT",
     "save_model",
     "load_model",
@@ -29,6 +31,32 @@ log = logging.getLogger(__name__)
 
 #: The model shipped with the package (written by the lead after training ``recipes/gttnet/default.yaml``).
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "assets" / "gttnet_default.pt"
+#: The cross-domain (PointNet) model for any other skeleton (``recipes/gttnet/pointnet.yaml``); it may be
+#: absent, when no trained model was good enough to ship (see docs/MODEL_CARD_POINTNET.md).
+BUNDLED_POINTNET_MODEL = BUNDLED_MODEL.with_name("gttnet_pointnet.pt")
+
+
+def bundled_model_for(skeleton) -> Path:
+    """The bundled model that fits a topology: the CMU-31 model for CMU-31, the PointNet model otherwise.
+
+    Args:
+        skeleton: The input's :class:`gttdata.skeleton.Skeleton`.
+
+    Raises:
+        ModelError: The fitting model is not installed (the message says how to get or pass one).
+    """
+    from gttdata.skeleton import CMU31_JOINTS
+
+    if skeleton.joint_names == CMU31_JOINTS:
+        return BUNDLED_MODEL
+    if not BUNDLED_POINTNET_MODEL.is_file():
+        raise ModelError(
+            f"no bundled model for skeleton {skeleton.name!r} ({skeleton.n_joints} joints): the bundled "
+            f"{BUNDLED_MODEL.name} expects CMU-31 and no cross-domain model is installed "
+            f"({BUNDLED_POINTNET_MODEL.name}); train one with 'gttnet train recipes/gttnet/pointnet.yaml' "
+            "and pass --model RUN_DIR/model.pt"
+        )
+    return BUNDLED_POINTNET_MODEL
 
 
 def save_model(path: str | Path, model: GTTNet, *, card: dict | None = None) -> Path:
@@ -134,8 +162,11 @@ _CACHE: dict[tuple[str, str], GTTNetReconstructor] = {}
 def reconstruct_gttnet(
     obs: Observations, model: str | None = None, lambda2: float | None = None
 ) -> Reconstruction:
-    """GTT-Net with the bundled model, or the model file/run directory ``model``; ``lambda2`` as in
-    :class:`GTTNetReconstructor`."""
+    """GTT-Net with the bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31
+    model for CMU-31, the PointNet model otherwise), or the model file/run directory ``model``;
+    ``lambda2`` as in :class:`GTTNetReconstructor`."""
+    if model is None:
+        model = str(bundled_model_for(obs.skeleton))
     key = (str(model), str(lambda2))
     if key not in _CACHE:
         _CACHE[key] = GTTNetReconstructor(model, lambda2=lambda2)

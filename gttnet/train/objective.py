@@ -51,14 +51,16 @@ def stage_losses(
                 vals.append(losses.structure_loss(out.x_est, item.points3d, norm=stage.norm))
             elif name == "smoothness":
                 vals.append(losses.smoothness_loss(out.a_sparse, out.x_est, lambda1=cfg.lambda1))
-            elif out.pointnet_recon is None:
+            elif getattr(model, "pointnet", None) is None:
                 raise ValueError(
-                    f"stage {stage.name!r} weights the pointnet loss but the model has no PointNet decoder for "
-                    f"{item.inputs.domain!r}"
+                    f"stage {stage.name!r} weights the pointnet loss but the model has no PointNet"
                 )
-            else:
+            elif out.pointnet_recon is not None:
+                # Only topologies with a decoder have a reconstruction target; augmented or unseen
+                # topologies (joint subsets, merged joints, markers) train the other losses alone.
                 vals.append(losses.pointnet_loss(out.pointnet_recon, item.inputs.x_init, norm=stage.norm))
-        parts[name] = torch.stack([v.float() for v in vals]).mean()
+        if vals:
+            parts[name] = torch.stack([v.float() for v in vals]).mean()
     total = sum(stage.losses[k] * v for k, v in parts.items())
     return total, parts
 

@@ -1,0 +1,63 @@
+"""``--method gttnet`` picks the bundled model by topology: CMU-31 model for CMU-31, PointNet otherwise."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from gttdata.capture.views import make_view
+from gttdata.skeleton import cmu31
+from gttdata.skeletons import get_skeleton
+from gttnet.errors import ModelError
+from gttnet.model import inference
+from gttnet.model.network import gttnet_pointnet
+from tests.gttnet.test_authors_json import _sample
+
+
+@pytest.fixture(scope="module")
+def coco_sample():
+    return _sample("coco17")
+
+
+@pytest.fixture
+def pointnet_bundle(tmp_path, monkeypatch):
+    """An (untrained) PointNet model installed as the bundled cross-domain model."""
+    path = inference.save_model(tmp_path / "gttnet_pointnet.pt", gttnet_pointnet(k=8, domains={"hand21": 21}))
+    monkeypatch.setattr(inference, "BUNDLED_POINTNET_MODEL", path)
+    monkeypatch.setattr(inference, "_CACHE", {})
+    return path
+
+
+def test_bundled_choice_by_topology(pointnet_bundle):
+    assert inference.bundled_model_for(cmu31()) == inference.BUNDLED_MODEL
+    for name in ("coco17", "hand21", "quadruped36"):
+        assert inference.bundled_model_for(get_skeleton(name)) == pointnet_bundle
+
+
+def test_missing_pointnet_model_says_how_to_get_one(tmp_path, monkeypatch, coco_sample):
+    monkeypatch.setattr(inference, "BUNDLED_POINTNET_MODEL", tmp_path / "absent.pt")
+    with pytest.raises(ModelError, match=r"coco17.*17 joints.*pointnet\.yaml.*--model"):
+        inference.reconstruct_gttnet(make_view(coco_sample, "none", seed=0)[0])
+
+
+def test_gttnet_on_a_17_joint_input_uses_the_pointnet_model(pointnet_bundle, coco_sample):
+    obs, _ = make_view(coco_sample, "none", seed=0)
+    rec = inference.reconstruct_gttnet(obs)
+    assert rec.points3d.shape == (coco_sample.n_images, 17, 3)
+
+
+def test_cli_gttnet_on_authors_17_joint_file(tmp_path, pointnet_bundle, coco_sample):
+    from gttnet.cli import main
+    from gttnet.io.gttnet_json import write_gttnet_json
+
+    path = write_gttnet_json(coco_sample, tmp_path / "authors_layout.json")
+    args = ["reconstruct", str(path), "--method", "gttnet", "--sequencing", "none", "--json"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output.strip().splitlines()[-1])
+    assert out["method"] == "gttnet" and out["n_joints"] == 17 and "mpjpe_mm" in out
+    # --model overrides the choice: the CMU-31 model refuses 17 joints with one line.
+    res = CliRunner().invoke(main, [*args, "--model", str(inference.BUNDLED_MODEL)])
+    assert res.exit_code != 0 and "31 joints" in res.output and "Traceback" not in res.output
