@@ -281,6 +281,7 @@ def _capture_params(
         fps_hz=tuple(float(f) for f in np.broadcast_to(fps, (n_cameras,))),
         duration_s=window_s,
         stagger=c.stagger,
+        start_spread_s=float(c.start_spread_s.draw(rng)),
         min_gap_s=c.min_gap_s,
         jitter_s=float(c.jitter_s.draw(rng)),
         drift_ppm=tuple(float(d) for d in c.drift_ppm.draw(rng, size=n_cameras)),

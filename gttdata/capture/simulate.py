@@ -30,6 +30,7 @@ class CaptureParams:
         fps_hz: Frame rate of each camera, Hz, length V.
         duration_s: Capture duration (of each event), seconds.
         stagger: Clock offset mode (see :data:`gttdata.capture.timing.STAGGER_MODES`).
+        start_spread_s: Each camera's start is delayed by a further ``uniform(0, start_spread_s)`` seconds.
         min_gap_s: Smallest time between any two images, seconds.
         jitter_s: Std of per-image timing jitter, seconds.
         drift_ppm: Clock rate error of each camera, ppm, length V.
@@ -43,6 +44,7 @@ class CaptureParams:
     fps_hz: tuple[float, ...]
     duration_s: float
     stagger: str = "even"
+    start_spread_s: float = 0.0
     min_gap_s: float = 1e-4
     jitter_s: float = 0.0
     drift_ppm: tuple[float, ...] = ()
@@ -123,6 +125,8 @@ def _timeline(params: CaptureParams, rng: np.random.Generator, n_cameras: int, t
         raise ValueError(f"params.fps_hz must have one rate per camera ({n_cameras}), got {fps.shape[0]}")
     drift = np.asarray(params.drift_ppm or (0.0,) * n_cameras, dtype=np.float64)
     offsets = camera_offsets(fps, stagger=params.stagger, rng=rng)
+    if params.start_spread_s > 0:  # no draw otherwise: older recipes keep their random stream
+        offsets = offsets + rng.uniform(0.0, params.start_spread_s, size=n_cameras)
     cam, t, _ = sample_timestamps(
         fps,
         total_s,
@@ -176,9 +180,10 @@ def _simulate(
     event = np.searchsorted(starts, t, side="right") - 1
     keep = (event >= 0) & (t < starts[np.maximum(event, 0)] + params.duration_s)
     cam, t, event = cam[keep], t[keep], event[keep]
+    frame = _stream_index(cam)  # each camera's own frame counter, before any frame is dropped
     if params.image_drop_rate > 0:
         keep = drop_images(cam, rng, rate=params.image_drop_rate)
-        cam, t, event = cam[keep], t[keep], event[keep]
+        cam, t, event, frame = cam[keep], t[keep], event[keep], frame[keep]
     n = t.shape[0]
     points = np.empty((n, sk.n_joints, 3))
     for e, (motion, start) in enumerate(segments):
@@ -213,6 +218,9 @@ def _simulate(
         "n_outliers": int((outlier & visible).sum()),
         "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
     }
+    if params.image_drop_rate > 0:
+        # What a camera's own timestamps reveal (frame k at k / fps on its clock): dropped frames as gaps.
+        meta["frame_number"] = frame.astype(int).tolist()
     if len(segments) > 1:
         meta["event_id"] = event.astype(int).tolist()
         meta["event_start_s"] = starts.tolist()

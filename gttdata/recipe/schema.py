@@ -184,6 +184,8 @@ class CaptureSpec:
         fps_shared: Draw one rate for all cameras instead of one per camera.
         stagger: Camera clock offsets: ``even`` (camera slot v at ``v / (V fps_max)``, slots shuffled) or
             ``random`` (uniform in one period); both are then checked so no two images are concurrent.
+        start_spread_s: Cameras started by hand: each camera's first frame is delayed by a further
+            ``uniform(0, start_spread_s)`` seconds (drawn per camera); it records until the window ends.
         min_gap_s: Smallest allowed time between any two images of different cameras, seconds.
         jitter_s: Std of the per-image timing jitter, seconds (clipped to a quarter period).
         drift_ppm: Clock rate error of each camera, parts per million.
@@ -199,6 +201,7 @@ class CaptureSpec:
     fps_hz: Param = _p(30.0, gt=0, allow_list=True)
     fps_shared: bool = False
     stagger: str = _f("even", choices=("even", "random"))
+    start_spread_s: Param = _p(0.0, ge=0)
     min_gap_s: float = _f(1e-4, gt=0)
     jitter_s: Param = _p(0.0, ge=0)
     drift_ppm: Param = _p(0.0)

@@ -22,17 +22,46 @@ log = logging.getLogger(__name__)
 LAMBDAS: tuple[float, ...] = tuple(10.0 ** np.arange(-1.0, 5.01, 0.5))
 
 
-def difference_operator(n: int, order: int = 2) -> sp.csr_matrix:
+def difference_operator(n: int, order: int = 2, *, timestamp_s: np.ndarray | None = None) -> sp.csr_matrix:
     """Finite-difference high-pass filter along a sequence, shape ``(n - order, n)``.
+
+    With ``timestamp_s`` (sorted), the differences are divided differences of the irregular samples,
+    scaled by the mean spacing to the power ``order`` so that evenly spaced times give exactly the
+    index-based filter (and the same prior weight means the same thing). Spacings are floored at 1e-3 of
+    the mean spacing.
 
     Args:
         n: Sequence length.
         order: Difference order (1: velocity, 2: acceleration).
+        timestamp_s: Sample times in increasing order, seconds, shape ``(n,)``, or None for even spacing.
 
     Example:
         >>> difference_operator(4).toarray().astype(int).tolist()
         [[1, -2, 1, 0], [0, 1, -2, 1]]
+        >>> difference_operator(4, timestamp_s=np.array([0.0, 2.0, 4.0, 6.0])).toarray().tolist()
+        [[1.0, -2.0, 1.0, 0.0], [0.0, 1.0, -2.0, 1.0]]
     """
+    if timestamp_s is not None:
+        t = np.asarray(timestamp_s, dtype=np.float64)
+        if t.shape != (n,):
+            raise ValueError(f"timestamp_s must have shape ({n},), got {t.shape}")
+        if n <= order:
+            return sp.csr_matrix((max(n - order, 0), n))
+        h = np.diff(t)
+        if np.any(h < 0):
+            raise ValueError("timestamp_s must be sorted in increasing order")
+        hbar = float(h.mean()) if h.size else 1.0
+        h = np.maximum(h, 1e-3 * hbar)
+        # Divided differences: level q spans q + 1 samples; f[i..i+q] = (f[i+1..] - f[i..]) / (t[i+q] - t[i]).
+        G = sp.eye(n, format="csr")
+        for q in range(1, order + 1):
+            m = G.shape[0]
+            span = np.cumsum(np.concatenate([[0.0], h]))
+            width = span[q : q + m - 1] - span[: m - 1]
+            D = sp.diags(1.0 / width) @ (sp.eye(m - 1, m, k=1) - sp.eye(m - 1, m))
+            G = D @ G
+        fact = float(np.prod(np.arange(1, order + 1)))
+        return sp.csr_matrix(G * (fact * hbar**order))
     G = sp.eye(n, format="csr")
     for _ in range(order):
         m = G.shape[0]
@@ -40,7 +69,9 @@ def difference_operator(n: int, order: int = 2) -> sp.csr_matrix:
     return sp.csr_matrix(G)
 
 
-def _banded_systems(P: np.ndarray, lam: float, order: int) -> np.ndarray:
+def _banded_systems(
+    P: np.ndarray, lam: float, order: int, timestamp_s: np.ndarray | None = None
+) -> np.ndarray:
     """Upper banded storage of every joint's normal matrix ``blockdiag(P_n) + lam G^T G (x) I3``.
 
     Unknowns are ordered ``3 n + a`` (image-major), so the matrix has ``3 * order`` super-diagonals.
@@ -49,6 +80,7 @@ def _banded_systems(P: np.ndarray, lam: float, order: int) -> np.ndarray:
         P: Ray projectors, shape ``(N, J, 3, 3)``.
         lam: Prior weight.
         order: Difference order.
+        timestamp_s: Sorted sample times for divided differences (None: even spacing).
 
     Returns:
         ``ab`` of shape ``(J, 3 order + 1, 3N)`` for ``scipy.linalg.solveh_banded`` (``lower=False``).
@@ -56,7 +88,8 @@ def _banded_systems(P: np.ndarray, lam: float, order: int) -> np.ndarray:
     n, J = P.shape[:2]
     u = max(3 * order, 2)
     ab = np.zeros((J, u + 1, 3 * n))
-    GtG = (difference_operator(n, order).T @ difference_operator(n, order)).tocsr()
+    G = difference_operator(n, order, timestamp_s=timestamp_s)
+    GtG = (G.T @ G).tocsr()
     for d in range(order + 1):
         diag = np.zeros(n)
         diag[: n - d] = GtG.diagonal(d)
@@ -69,7 +102,13 @@ def _banded_systems(P: np.ndarray, lam: float, order: int) -> np.ndarray:
 
 
 def fit_highpass(
-    centers: np.ndarray, rays: np.ndarray, visible: np.ndarray, *, lam: float, order: int = 2
+    centers: np.ndarray,
+    rays: np.ndarray,
+    visible: np.ndarray,
+    *,
+    lam: float,
+    order: int = 2,
+    timestamp_s: np.ndarray | None = None,
 ) -> np.ndarray:
     """Trajectories minimising ray residuals plus ``lam * ||G X_p||^2`` along an already ordered sequence.
 
@@ -79,13 +118,15 @@ def fit_highpass(
         visible: Observed-joint mask, shape ``(N, J)``.
         lam: Weight of the high-pass penalty (dimensionless).
         order: Difference order of the filter ``G``.
+        timestamp_s: The images' times, sorted, seconds, shape ``(N,)``: divided differences of the
+            irregular samples (see :func:`difference_operator`); None: evenly spaced.
 
     Returns:
         Joints in world, metres, shape ``(N, J, 3)``, in the same (time) order.
     """
     n, J = visible.shape
     P = ray_projectors(rays, visible)
-    ab = _banded_systems(P, lam, order)
+    ab = _banded_systems(P, lam, order, timestamp_s)
     rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
     X = np.empty((n, J, 3))
     for j in range(J):
@@ -94,7 +135,13 @@ def fit_highpass(
 
 
 def _cross_validate(
-    centers: np.ndarray, rays: np.ndarray, visible: np.ndarray, *, n_folds: int, order: int
+    centers: np.ndarray,
+    rays: np.ndarray,
+    visible: np.ndarray,
+    *,
+    n_folds: int,
+    order: int,
+    timestamp_s: np.ndarray | None = None,
 ) -> tuple[float, dict[float, float]]:
     """Prior weight minimising the mean held-out ray distance; held-out images keep only the prior."""
     n = visible.shape[0]
@@ -104,7 +151,7 @@ def _cross_validate(
         train_vis = visible.copy()
         train_vis[held] = False
         for lam in LAMBDAS:
-            X = fit_highpass(centers, rays, train_vis, lam=lam, order=order)
+            X = fit_highpass(centers, rays, train_vis, lam=lam, order=order, timestamp_s=timestamp_s)
             score[lam] += float(np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held])))
         count += int(visible[held].sum())
     cv = {lam: s / max(count, 1) for lam, s in score.items()}
@@ -118,14 +165,16 @@ def _cross_validate(
     summary="high-pass-filter trajectory prior (Valmadre & Lucey)",
 )
 def reconstruct_hpf(
-    obs: Observations, *, lam: float | None = None, order: int = 2, n_folds: int = 5
+    obs: Observations, *, lam: float | None = None, order: int = 2, n_folds: int = 5, spacing: str = "order"
 ) -> Reconstruction:
     """High-pass-filter prior: ray residuals plus ``lam * ||G X_p||^2`` along the global image order.
 
     ``G`` is the ``order``-th finite difference along the time-ordered images (Valmadre & Lucey 2012
     use such high-pass filters as a general trajectory prior; the paper runs HPF with complete
-    sequencing, so it is registered as needing ``full``). Uniform sampling is assumed: only the order
-    of the images is used, not their timestamps (staggered cameras at equal rates sample evenly).
+    sequencing, so it is registered as needing ``full``). With ``spacing="order"`` uniform sampling is
+    assumed: only the order of the images is used, not their timestamps (staggered cameras at equal rates
+    sample evenly); ``spacing="time"`` uses divided differences of the timestamps (unequal rates, cameras
+    started at arbitrary times, recovered clocks).
     Each joint is one sparse banded linear system in its ``3N`` coordinates; missing joints are filled
     by the prior alone.
 
@@ -139,19 +188,23 @@ def reconstruct_hpf(
         lam: Prior weight; chosen by cross-validation when None.
         order: Difference order of the filter (2 penalises acceleration).
         n_folds: Folds of the cross-validation.
+        spacing: ``"order"`` (even spacing) or ``"time"`` (divided differences of the timestamps).
 
     Returns:
         Reconstruction with the temporal chain as affinity and the time order as order.
     """
+    if spacing not in ("order", "time"):
+        raise ValueError(f"hpf: spacing must be 'order' or 'time', got {spacing!r}")
     seq = np.argsort(np.asarray(obs.timestamp_s), kind="stable")
+    ts = np.asarray(obs.timestamp_s, dtype=np.float64)[seq] if spacing == "time" else None
     centers, rays, vis = obs.centers()[seq], obs.rays()[seq], obs.visible[seq]
     cv: dict[float, float] = {}
     if lam is None:
-        lam, cv = _cross_validate(centers, rays, vis, n_folds=n_folds, order=order)
+        lam, cv = _cross_validate(centers, rays, vis, n_folds=n_folds, order=order, timestamp_s=ts)
     if not lam > 0:
         raise ValueError(f"hpf: lam must be > 0, got {lam}")
     X = np.empty((obs.n_images, obs.n_joints, 3))
-    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order)
+    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts)
     log.debug("hpf: lam=%g", lam)
     return Reconstruction(
         points3d=X,

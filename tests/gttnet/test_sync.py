@@ -1,0 +1,246 @@
+"""Clock recovery (gttnet.sync): offsets of seconds, unequal rates, drift, dropped frames, invariances."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gttdata.cameras import ring_rig
+from gttdata.capture.sample import CaptureSample, temporal_affinity
+from gttdata.capture.views import Observations, make_view
+from gttnet.errors import GttNetError, SequencingError
+from gttnet.sync import Clocks, apply_clocks, clock_times, recover_clocks
+from tests.fixtures.scenes import body_positions
+
+
+def _capture(
+    offsets_s=(0.0, 1.3, 0.4),
+    fps=(25.0, 30.0, 60.0),
+    *,
+    end_s: float = 3.0,
+    drift_ppm=None,
+    sigma_px: float = 1.0,
+    n_joints: int = 12,
+    seed: int = 0,
+) -> CaptureSample:
+    """Cameras started at ``offsets_s`` (s) at rates ``fps``, recording until ``end_s``; exact geometry."""
+    v = len(fps)
+    rig = ring_rig(v)
+    drift = np.zeros(v) if drift_ppm is None else np.asarray(drift_ppm, dtype=np.float64)
+    cams, times, idx = [], [], []
+    for c in range(v):
+        k = np.arange(int((end_s - offsets_s[c]) * fps[c]))
+        cams.append(np.full(k.size, c))
+        times.append(offsets_s[c] + k * (1.0 + 1e-6 * drift[c]) / fps[c])
+        idx.append(k)
+    t, cam, si = np.concatenate(times), np.concatenate(cams), np.concatenate(idx)
+    o = np.argsort(t, kind="stable")
+    t, cam, si = t[o], cam[o].astype(np.int32), si[o].astype(np.int32)
+    n = t.size
+    X = body_positions(t, n_joints, seed=seed)
+    px, depth = np.empty((n, n_joints, 2)), np.empty((n, n_joints))
+    for i in range(n):
+        px[i], depth[i] = rig[cam[i]].project(X[i])
+    vis = depth > 0
+    noisy = px + np.random.default_rng(seed).normal(0.0, sigma_px, px.shape)
+    nbr, w = temporal_affinity(t, cam, X)
+    from gttdata.skeleton import Skeleton
+
+    return CaptureSample(
+        name=f"sync/{seed}",
+        motion_name="synthetic_body",
+        skeleton=Skeleton(
+            name="toy",
+            joint_names=tuple(f"j{i}" for i in range(n_joints)),
+            parents=(-1,) + (0,) * (n_joints - 1),
+        ),
+        cam_id=cam,
+        timestamp_s=t,
+        stream_index=si,
+        global_order=np.arange(n, dtype=np.int32),
+        keypoints_px=np.where(vis[..., None], noisy, np.nan).astype(np.float32),
+        visible=vis,
+        keypoints_gt_px=px.astype(np.float32),
+        K=np.stack([rig[c].K for c in cam]),
+        cam_from_world=np.stack([rig[c].cam_from_world for c in cam]),
+        image_size=np.array([rig[c].image_size for c in range(v)], dtype=np.int32),
+        points3d=X,
+        affinity_nbr=nbr,
+        affinity_w=w,
+    )
+
+
+def _frame_errors(obs: Observations, gt_t: np.ndarray, clocks: Clocks, frame_times_s=None) -> np.ndarray:
+    """Per-camera error of the recovered times, in frames, after removing the unobservable common shift."""
+    err = clock_times(obs, clocks, frame_times_s=frame_times_s) - gt_t
+    err -= np.median(err)
+    return np.array(
+        [np.median(err[obs.cam_id == c]) * clocks.rate_hz[k] for k, c in enumerate(clocks.cameras)]
+    )
+
+
+@pytest.fixture(scope="module")
+def capture():
+    return _capture()
+
+
+@pytest.fixture(scope="module")
+def recovered(capture):
+    obs, gt = make_view(capture, "partial")
+    return obs, gt, recover_clocks(obs, fps={0: 25.0, 1: 30.0, 2: 60.0})
+
+
+def test_offsets_of_seconds_at_unequal_rates(recovered):
+    obs, gt, clocks = recovered
+    err = _frame_errors(obs, gt.timestamp_s, clocks)
+    assert np.abs(err).max() < 0.1, err
+    # Time 0 is the earliest camera's first frame: camera 0 here; the others started 1.3 s and 0.4 s later.
+    np.testing.assert_allclose(clocks.offset_s, [0.0, 1.3, 0.4], atol=0.1 / 60)
+    assert np.all(np.isfinite(clocks.offset_std_s)) and np.all(clocks.offset_std_s > 0)
+
+
+def test_wrong_rates_are_worse(capture, recovered):
+    obs, gt, clocks = recovered
+    wrong = recover_clocks(obs, fps=30.0)  # every camera assumed at 30 Hz
+    good = np.abs(
+        clock_times(obs, clocks) - gt.timestamp_s - np.median(clock_times(obs, clocks) - gt.timestamp_s)
+    )
+    bad_t = clock_times(obs, wrong)
+    bad = np.abs(bad_t - gt.timestamp_s - np.median(bad_t - gt.timestamp_s))
+    assert np.median(bad) > 10 * np.median(good)
+
+
+def test_camera_relabelling_and_image_permutation(capture, recovered):
+    obs, gt, clocks = recovered
+    t_ref = clock_times(obs, clocks)
+    relabel = np.array([7, 2, 5])  # camera 0 -> 7, 1 -> 2, 2 -> 5: new index order differs from the old
+    perm = np.random.default_rng(3).permutation(obs.n_images)
+    shuffled = replace(
+        obs,
+        cam_id=relabel[obs.cam_id][perm],
+        K=obs.K[perm],
+        cam_from_world=obs.cam_from_world[perm],
+        keypoints_px=obs.keypoints_px[perm],
+        visible=obs.visible[perm],
+        stream_index=obs.stream_index[perm],
+        image_size=obs.image_size,
+    )
+    c2 = recover_clocks(shuffled, fps={7: 25.0, 2: 30.0, 5: 60.0})
+    assert c2.cameras.tolist() == [2, 5, 7]
+    # The same answer up to the optimiser's tolerance (a hundredth of a 60 Hz frame).
+    np.testing.assert_allclose(clock_times(shuffled, c2), t_ref[perm], atol=0.01 / 60)
+
+
+def test_ground_truth_never_reaches_the_estimator(capture, recovered):
+    obs, _, clocks = recovered
+    rng = np.random.default_rng(0)
+    corrupt = replace(
+        capture,
+        timestamp_s=np.sort(rng.uniform(0, 100, capture.n_images)),
+        points3d=rng.normal(size=capture.points3d.shape),
+        keypoints_gt_px=rng.normal(size=capture.keypoints_gt_px.shape).astype(np.float32),
+        affinity_nbr=np.full_like(capture.affinity_nbr, -1),
+    )
+    obs2, _ = make_view(corrupt, "partial")
+    c2 = recover_clocks(obs2, fps={0: 25.0, 1: 30.0, 2: 60.0})
+    np.testing.assert_array_equal(c2.offset_s, clocks.offset_s)
+    # A full view's timestamps are ignored too: garbage timestamps, same clocks.
+    full, _ = make_view(capture, "full")
+    full = replace(full, timestamp_s=rng.uniform(0, 1, full.n_images))
+    c3 = recover_clocks(full, fps={0: 25.0, 1: 30.0, 2: 60.0})
+    np.testing.assert_allclose(clock_times(full, c3), clock_times(full, clocks), atol=0.01 / 60)
+
+
+def test_dropped_frames_need_frame_times(capture):
+    obs, gt = make_view(capture, "partial")
+    rates = np.array([25.0, 30.0, 60.0])
+    tau = obs.stream_index / rates[obs.cam_id]
+    # Drop 8 % of the frames; the video index is renumbered, the camera's own timestamps keep the gaps.
+    keep = np.random.default_rng(1).random(obs.n_images) > 0.08
+    renum = np.zeros(keep.sum(), dtype=np.int64)
+    cam = obs.cam_id[keep]
+    for c in range(3):
+        renum[cam == c] = np.arange((cam == c).sum())
+    dropped = replace(
+        obs,
+        cam_id=cam,
+        K=obs.K[keep],
+        cam_from_world=obs.cam_from_world[keep],
+        keypoints_px=obs.keypoints_px[keep],
+        visible=obs.visible[keep],
+        stream_index=renum,
+    )
+    fps = {0: 25.0, 1: 30.0, 2: 60.0}
+    with_times = recover_clocks(dropped, fps=fps, frame_times_s=tau[keep])
+    t_ok = clock_times(dropped, with_times, frame_times_s=tau[keep]) - gt.timestamp_s[keep]
+    assert np.abs(t_ok - np.median(t_ok)).max() * 60 < 0.2
+    # Without them the renumbered streams cannot all fit one clock.
+    blind = recover_clocks(dropped, fps=fps)
+    t_bad = clock_times(dropped, blind) - gt.timestamp_s[keep]
+    assert np.abs(t_bad - np.median(t_bad)).max() > 5 * np.abs(t_ok - np.median(t_ok)).max()
+
+
+def test_drift_is_recovered_when_asked():
+    cap = _capture(
+        (0.0, 0.2, 0.5), (30.0, 30.0, 30.0), end_s=4.0, drift_ppm=(0.0, 3000.0, -3000.0), sigma_px=0.5
+    )
+    obs, gt = make_view(cap, "partial")
+    clocks = recover_clocks(obs, fps=30.0, estimate_drift=True)
+    rel = clocks.drift_ppm - clocks.drift_ppm[0]
+    np.testing.assert_allclose(rel, [0.0, 3000.0, -3000.0], atol=500.0)
+    assert np.abs(_frame_errors(obs, gt.timestamp_s, clocks)).max() < 0.1
+
+
+def test_apply_clocks_gives_full_sequencing(recovered):
+    obs, gt, clocks = recovered
+    full = apply_clocks(obs, clocks)
+    assert full.sequencing == "full"
+    assert np.all(np.diff(full.timestamp_s) >= 0)
+    # Same images, reordered: each keeps its camera, stream index and keypoints.
+    t = clock_times(obs, clocks)
+    seq = np.argsort(t, kind="stable")
+    np.testing.assert_array_equal(full.stream_index, obs.stream_index[seq])
+    np.testing.assert_array_equal(full.keypoints_px, obs.keypoints_px[seq])
+
+
+def test_clocks_file_round_trip(tmp_path, recovered):
+    clocks = recovered[2]
+    path = clocks.save(tmp_path / "clocks.json")
+    back = Clocks.load(path)
+    for name in ("cameras", "offset_s", "rate_hz", "drift_ppm", "offset_std_s"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(clocks, name))
+    with pytest.raises(FileExistsError):
+        clocks.save(path)
+    clocks.save(path, overwrite=True)
+    assert [p.name for p in tmp_path.iterdir()] == ["clocks.json"]  # no temp file left behind
+    bad = json.loads(path.read_text())
+    bad["cameras"][1]["offset_s"] = "soon"
+    path.write_text(json.dumps(bad))
+    with pytest.raises(GttNetError, match=r"clocks.json: field 'cameras\[1\].offset_s': expected a number"):
+        Clocks.load(path)
+
+
+def test_bad_inputs_are_one_line_errors(capture, recovered):
+    obs = recovered[0]
+    none, _ = make_view(capture, "none")
+    with pytest.raises(SequencingError, match="frame order"):
+        recover_clocks(none)
+    with pytest.raises(GttNetError, match="fps: no frame rate for camera 2"):
+        recover_clocks(obs, fps={0: 25.0, 1: 30.0})
+    with pytest.raises(GttNetError, match="rate must be a positive number"):
+        recover_clocks(obs, fps=[25.0, 0.0, 60.0])
+    with pytest.raises(GttNetError, match=r"frame_times_s: expected shape"):
+        recover_clocks(obs, frame_times_s=np.zeros(3))
+
+
+def test_time_aware_difference_operator_is_exact_on_quadratics():
+    from gttnet.baselines.highpass import difference_operator
+
+    t = np.sort(np.random.default_rng(0).uniform(0, 2, 40))
+    G = difference_operator(40, 2, timestamp_s=t)
+    hbar = np.diff(t).mean()
+    np.testing.assert_allclose(G @ (3.0 * t**2 - t + 1.0), 6.0 * hbar**2, rtol=1e-9)
+    np.testing.assert_allclose(G @ (5.0 * t - 2.0), 0.0, atol=1e-9)
