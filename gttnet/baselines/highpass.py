@@ -27,8 +27,8 @@ def difference_operator(n: int, order: int = 2, *, timestamp_s: np.ndarray | Non
 
     With ``timestamp_s`` (sorted), the differences are divided differences of the irregular samples,
     scaled by the mean spacing to the power ``order`` so that evenly spaced times give exactly the
-    index-based filter (and the same prior weight means the same thing). Spacings are floored at 1e-3 of
-    the mean spacing.
+    index-based filter (and the same prior weight means the same thing). Spacings are floored at 0.1 of
+    the mean spacing (simultaneous images would make the system singular).
 
     Args:
         n: Sequence length.
@@ -51,7 +51,7 @@ def difference_operator(n: int, order: int = 2, *, timestamp_s: np.ndarray | Non
         if np.any(h < 0):
             raise ValueError("timestamp_s must be sorted in increasing order")
         hbar = float(h.mean()) if h.size else 1.0
-        h = np.maximum(h, 1e-3 * hbar)
+        h = np.maximum(h, 0.1 * hbar)  # (near-)simultaneous images: keep the system well conditioned
         # Divided differences: level q spans q + 1 samples; f[i..i+q] = (f[i+1..] - f[i..]) / (t[i+q] - t[i]).
         G = sp.eye(n, format="csr")
         for q in range(1, order + 1):

@@ -34,6 +34,7 @@ _METHOD_MODULES: tuple[str, ...] = (
     "gttnet.baselines.dloe",
     "gttnet.baselines.trajectory_basis",
     "gttnet.baselines.highpass",
+    "gttnet.sync.method",
     "gttnet.model.inference",
 )
 
