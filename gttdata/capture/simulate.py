@@ -30,7 +30,9 @@ class CaptureParams:
         fps_hz: Frame rate of each camera, Hz, length V.
         duration_s: Capture duration (of each event), seconds.
         stagger: Clock offset mode (see :data:`gttdata.capture.timing.STAGGER_MODES`).
-        start_spread_s: Each camera's start is delayed by a further ``uniform(0, start_spread_s)`` seconds.
+        start_spread_s: Cameras started by hand before the capture: camera ``v`` started
+            ``uniform(0, start_spread_s)`` seconds before its staggered offset, and its stream indices count
+            its frames from that start (so two streams' indices differ by seconds' worth of frames).
         min_gap_s: Smallest time between any two images, seconds.
         jitter_s: Std of per-image timing jitter, seconds.
         drift_ppm: Clock rate error of each camera, ppm, length V.
@@ -126,8 +128,8 @@ def _timeline(params: CaptureParams, rng: np.random.Generator, n_cameras: int, t
     drift = np.asarray(params.drift_ppm or (0.0,) * n_cameras, dtype=np.float64)
     offsets = camera_offsets(fps, stagger=params.stagger, rng=rng)
     if params.start_spread_s > 0:  # no draw otherwise: older recipes keep their random stream
-        offsets = offsets + rng.uniform(0.0, params.start_spread_s, size=n_cameras)
-    cam, t, _ = sample_timestamps(
+        offsets = offsets - rng.uniform(0.0, params.start_spread_s, size=n_cameras)
+    cam, t, frame = sample_timestamps(
         fps,
         total_s,
         offsets_s=offsets,
@@ -135,8 +137,9 @@ def _timeline(params: CaptureParams, rng: np.random.Generator, n_cameras: int, t
         jitter_s=params.jitter_s,
         drift_ppm=drift,
         min_gap_s=params.min_gap_s,
+        frame_counter=params.start_spread_s > 0,
     )
-    return cam, t, offsets
+    return cam, t, frame, offsets
 
 
 def _stream_index(cam: np.ndarray) -> np.ndarray:
@@ -174,13 +177,18 @@ def _simulate(
     """Core simulation; ``segments`` are ``(motion, start_s)``, each lasting ``params.duration_s``."""
     sk = segments[0][0].skeleton
     total = segments[-1][1] + params.duration_s
-    cam, t, offsets = _timeline(params, rng, len(rig), total)
+    cam, t, frame, offsets = _timeline(params, rng, len(rig), total)
     # Each image belongs to the event whose interval contains it; images in a gap are never taken.
     starts = np.array([s for _, s in segments])
     event = np.searchsorted(starts, t, side="right") - 1
     keep = (event >= 0) & (t < starts[np.maximum(event, 0)] + params.duration_s)
-    cam, t, event = cam[keep], t[keep], event[keep]
-    frame = _stream_index(cam)  # each camera's own frame counter, before any frame is dropped
+    cam, t, event, frame = cam[keep], t[keep], event[keep], frame[keep]
+    if (
+        params.start_spread_s <= 0
+    ):  # streams numbered from their first image, as recipes before start_spread_s
+        frame = _stream_index(cam)
+    # A camera's video starts at its first kept frame's counter (0 unless it started before the capture).
+    first = {int(v): int(frame[cam == v].min()) for v in np.unique(cam)}
     if params.image_drop_rate > 0:
         keep = drop_images(cam, rng, rate=params.image_drop_rate)
         cam, t, event, frame = cam[keep], t[keep], event[keep], frame[keep]
@@ -219,7 +227,8 @@ def _simulate(
         "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
     }
     if params.image_drop_rate > 0:
-        # What a camera's own timestamps reveal (frame k at k / fps on its clock): dropped frames as gaps.
+        # What a camera's own timestamps reveal (frame k at k / fps on its clock): dropped frames as gaps,
+        # where the stream index (the video's frame index) runs on without them.
         meta["frame_number"] = frame.astype(int).tolist()
     if len(segments) > 1:
         meta["event_id"] = event.astype(int).tolist()
@@ -230,7 +239,7 @@ def _simulate(
         skeleton=sk,
         cam_id=cam.astype(np.int32),
         timestamp_s=t,
-        stream_index=_stream_index(cam),
+        stream_index=_stream_index(cam) + np.array([first[int(v)] for v in cam], dtype=np.int32),
         global_order=np.arange(n, dtype=np.int32),
         keypoints_px=np.where(visible[..., None], noisy, np.nan).astype(np.float32),
         visible=visible,

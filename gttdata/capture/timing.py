@@ -107,10 +107,12 @@ def sample_timestamps(
     jitter_s: float = 0.0,
     drift_ppm: np.ndarray | float = 0.0,
     min_gap_s: float = 1e-4,
+    frame_counter: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Capture times of every image of every camera within ``[0, duration_s)``.
 
-    Camera ``v`` takes frame ``k`` at ``offset_v + k (1 + drift_v 1e-6) / fps_v + e``, with timing jitter
+    Camera ``v`` takes frame ``k = 0, 1, ...`` at ``offset_v + k (1 + drift_v 1e-6) / fps_v + e`` (a negative
+    offset: the camera started before the capture, and its frames before time 0 are not kept), with timing jitter
     ``e ~ N(0, jitter_s)`` clipped to a quarter of the camera's period (so a stream never reorders),
     then :func:`separate_timestamps` guarantees no two images are concurrent.
 
@@ -122,6 +124,8 @@ def sample_timestamps(
         jitter_s: Std of the per-image jitter, seconds.
         drift_ppm: Clock rate error per camera (or one for all), parts per million.
         min_gap_s: Smallest gap between any two images, seconds.
+        frame_counter: Return each image's ``k`` (its camera's frame counter since the camera started)
+            instead of its index among the kept images of its camera.
 
     Returns:
         ``(cam_id, timestamp_s, stream_index)`` sorted by time: shapes ``(N,)`` int32, float64, int32.
@@ -140,7 +144,7 @@ def sample_timestamps(
         t = t[keep]
         cams.append(np.full(t.shape, v, dtype=np.int32))
         times.append(t)
-        idx.append(np.arange(t.shape[0], dtype=np.int32))
+        idx.append(k[keep].astype(np.int32) if frame_counter else np.arange(t.shape[0], dtype=np.int32))
     cam = np.concatenate(cams)
     t = separate_timestamps(np.concatenate(times), min_gap_s=min_gap_s)
     si = np.concatenate(idx)

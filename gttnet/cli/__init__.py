@@ -27,7 +27,7 @@ def main() -> None:
 
 def _register() -> None:
     """Attach subcommands; each module adds itself to ``main``. Missing modules are skipped."""
-    for mod in ("reconstruct", "train", "evaluate", "segment", "render"):
+    for mod in ("reconstruct", "sync", "train", "evaluate", "segment", "render"):
         try:
             module = __import__(f"gttnet.cli.{mod}", fromlist=["register"])
         except ModuleNotFoundError as exc:

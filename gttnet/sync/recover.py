@@ -15,7 +15,6 @@ of images N for a fixed search range, never an N x N matrix.
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -36,22 +35,26 @@ _SIN2_MIN = 1e-3  # rays closer than ~1.8 degrees to parallel say nothing about 
 
 @dataclass(frozen=True)
 class Stream:
-    """One camera's images in its own time order, read through a Gaussian kernel in time.
+    """One camera's images in its own time order, smoothed by a Gaussian kernel in time.
 
-    The rays are evaluated at any local time as a kernel-weighted mean of the nearby frames (width
-    ``kernel_s``). Unlike linear interpolation between two frames, this is smooth in time and averages
-    about the same amount of noise at every fractional position, so no sub-frame shift is favoured by the
-    noise alone; both streams of a pair are read through the same kernel, so the motion is blurred alike.
+    Each frame's rays are replaced by a kernel-weighted mean of the nearby frames (width ``kernel_s``);
+    between frames they are linearly interpolated. Smoothing makes the noise of neighbouring samples
+    correlated, so an interpolated ray averages about as much noise at every fractional position (and
+    the remaining difference is divided out, see :meth:`at`): no sub-frame shift is favoured by the noise
+    alone. Both streams of a pair are smoothed alike, so the motion is blurred alike. Arrays are stored
+    component-major for speed.
 
     Args:
         camera: Camera id.
         images: Index of each frame in the input observations, shape ``(n,)``.
         tau: Local time of each frame, seconds, shape ``(n,)`` increasing.
-        rays: Unit viewing rays in world, shape ``(n, J, 3)`` (zero where missing).
-        centers: Camera centres in world, metres, shape ``(n, 3)``.
-        visible: Observed-joint mask, shape ``(n, J)``.
-        kernel_s: Standard deviation of the Gaussian kernel, seconds.
-        max_gap_s: A query farther than this from the nearest frame is invalid (start, end, dropped runs).
+        rays: Smoothed unit viewing rays in world, shape ``(3, n, J)``.
+        centers: Smoothed camera centres in world, metres, shape ``(3, n)``.
+        ok: Whether a frame's smoothed joint has enough observed support, shape ``(n, J)``.
+        var: Noise variance of each frame's smoothed ray relative to one raw frame, shape ``(n,)``.
+        cov: Noise covariance of consecutive smoothed frames relative to one raw frame, shape ``(n,)``
+            (entry k: frames k and k + 1).
+        max_gap_s: Longest interval between consecutive frames that is interpolated across.
     """
 
     camera: int
@@ -59,44 +62,67 @@ class Stream:
     tau: np.ndarray
     rays: np.ndarray
     centers: np.ndarray
-    visible: np.ndarray
-    kernel_s: float
+    ok: np.ndarray
+    var: np.ndarray
+    cov: np.ndarray
     max_gap_s: float
 
+    @classmethod
+    def build(
+        cls,
+        camera: int,
+        images: np.ndarray,
+        tau: np.ndarray,
+        rays: np.ndarray,
+        centers: np.ndarray,
+        visible: np.ndarray,
+        *,
+        kernel_s: float,
+        max_gap_s: float,
+    ) -> Stream:
+        """Smooth raw rays ``(n, J, 3)``, centres ``(n, 3)`` and visibility ``(n, J)`` of one stream."""
+        n = tau.shape[0]
+        half = max(1, int(np.ceil(2.5 * kernel_s / max(float(np.median(np.diff(tau))), 1e-9))))
+        idx = np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]
+        inside = (idx >= 0) & (idx < n)
+        idx = np.clip(idx, 0, n - 1)
+        dt = (tau[:, None] - tau[idx]) / kernel_s
+        g = np.exp(-0.5 * dt * dt) * inside  # (n, W)
+        gs = g.sum(axis=1)
+        gv = g[:, :, None] * visible[idx]  # (n, W, J)
+        wv = gv.sum(axis=1)
+        r = np.einsum("nwj,nwja->anj", gv, rays[idx])
+        r /= np.maximum(np.sqrt((r * r).sum(axis=0)), 1e-12)
+        c = np.einsum("nw,nwa->an", g, centers[idx]) / gs
+        gn = g / gs[:, None]
+        var = (gn * gn).sum(axis=1)
+        # Covariance of smoothed frames k and k + 1: raw frame k - half + j is tap j of row k and tap j - 1 of
+        # row k + 1 (taps outside the stream have zero weight).
+        cov = np.zeros(n)
+        cov[:-1] = (gn[:-1, 1:] * gn[1:, :-1]).sum(axis=1)
+        ok = wv >= 0.5 * gs[:, None]
+        return cls(camera, images, tau, np.ascontiguousarray(r), c, ok, var, cov, max_gap_s)
+
     def at(self, tq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Kernel-smoothed rays at local times ``tq`` (shape ``(m,)``).
+        """Smoothed rays linearly interpolated at local times ``tq`` (shape ``(m,)``).
 
         Returns:
-            ``(rays (m, J, 3), centers (m, 3), ok (m, J), var (m,))``: ``ok`` is False outside the stream,
-            farther than ``max_gap_s`` from a frame, or where under half the kernel weight observes the
-            joint; ``var`` is the noise variance of the weighted mean relative to one frame's,
-            ``sum g^2 / (sum g)^2``.
+            ``(rays (3, m, J), centers (3, m), ok (m, J), var (m,))``: ``ok`` is False outside the
+            stream, across a gap longer than ``max_gap_s`` and where a bracketing frame lacks support;
+            ``var`` is the noise variance of the interpolated ray relative to one raw frame.
         """
         n = self.tau.shape[0]
-        half = int(np.ceil(3.0 * self.kernel_s / max(float(np.median(np.diff(self.tau))), 1e-9)))
-        k0 = np.searchsorted(self.tau, tq)
-        idx = np.clip(k0[:, None] + np.arange(-half, half + 1)[None, :], 0, n - 1)  # (m, W)
-        dt = (tq[:, None] - self.tau[idx]) / self.kernel_s
-        g = np.exp(-0.5 * dt * dt)
-        g[:, 1:] *= idx[:, 1:] != idx[:, :-1]  # clipped duplicates at the ends count once
-        near = np.abs(tq[:, None] - self.tau[idx]).min(axis=1) <= self.max_gap_s
-        inside = (
-            (tq >= self.tau[0] - 0.5 * self.max_gap_s) & (tq <= self.tau[-1] + 0.5 * self.max_gap_s) & near
-        )
-        gs = g.sum(axis=1)
-        var = (g * g).sum(axis=1) / np.maximum(gs, 1e-12) ** 2
-        gv = g[:, :, None] * self.visible[idx]  # (m, W, J)
-        wv = gv.sum(axis=1)
-        r = np.einsum("mwj,mwja->mja", gv, self.rays[idx])
-        r /= np.maximum(np.linalg.norm(r, axis=-1, keepdims=True), 1e-12)
-        c = np.einsum("mw,mwa->ma", g, self.centers[idx]) / np.maximum(gs, 1e-12)[:, None]
-        ok = inside[:, None] & (wv >= 0.5 * gs[:, None])
-        return r, c, ok, var
-
-    @functools.cached_property
-    def smoothed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`at` evaluated at the stream's own frame times."""
-        return self.at(self.tau)
+        k = np.clip(np.searchsorted(self.tau, tq, side="right") - 1, 0, n - 2)
+        t0, t1 = self.tau[k], self.tau[k + 1]
+        w = (tq - t0) / (t1 - t0)
+        inside = (w >= 0.0) & (w <= 1.0) & (t1 - t0 <= self.max_gap_s)
+        w = np.clip(w, 0.0, 1.0)
+        u = 1.0 - w
+        r = u[None, :, None] * self.rays[:, k] + w[None, :, None] * self.rays[:, k + 1]
+        r /= np.maximum(np.sqrt((r * r).sum(axis=0)), 1e-12)
+        c = u[None] * self.centers[:, k] + w[None] * self.centers[:, k + 1]
+        var = u * u * self.var[k] + w * w * self.var[k + 1] + 2.0 * u * w * self.cov[k]
+        return r, c, inside[:, None] & self.ok[k] & self.ok[k + 1], var
 
 
 def ray_meeting_error(
@@ -105,10 +131,10 @@ def ray_meeting_error(
     """Angular miss of two rays: closest-point distance over mean depth, radians.
 
     Args:
-        c1: Ray origins, shape ``(..., 3)``.
-        r1: Unit directions, shape ``(..., 3)``.
-        c2: Ray origins, shape ``(..., 3)``.
-        r2: Unit directions, shape ``(..., 3)``.
+        c1: Ray origins, shape ``(3, ...)`` (component first).
+        r1: Unit directions, shape ``(3, ...)``.
+        c2: Ray origins, shape ``(3, ...)``.
+        r2: Unit directions, shape ``(3, ...)``.
 
     Returns:
         ``(error, ok)``, shape ``(...)``: ``ok`` is False for near-parallel rays or a meeting point behind
@@ -120,18 +146,18 @@ def ray_meeting_error(
         >>> round(float(e), 3), bool(ok)
         (0.1, True)
     """
-    b = np.sum(r1 * r2, axis=-1)
-    w0 = c1 - c2
-    d = np.sum(r1 * w0, axis=-1)
-    e = np.sum(r2 * w0, axis=-1)
+    b = r1[0] * r2[0] + r1[1] * r2[1] + r1[2] * r2[2]
+    w0 = [c1[i] - c2[i] for i in range(3)]
+    d = r1[0] * w0[0] + r1[1] * w0[1] + r1[2] * w0[2]
+    e = r2[0] * w0[0] + r2[1] * w0[1] + r2[2] * w0[2]
     sin2 = 1.0 - b * b
     ok = sin2 > _SIN2_MIN
     inv = 1.0 / np.maximum(sin2, _SIN2_MIN)
     s = (b * e - d) * inv
     t = (e - b * d) * inv
-    gap = np.linalg.norm(w0 + s[..., None] * r1 - t[..., None] * r2, axis=-1)
+    g2 = sum((w0[i] + s * r1[i] - t * r2[i]) ** 2 for i in range(3))
     ok &= (s > 0) & (t > 0)
-    return np.where(ok, gap / np.maximum(0.5 * (s + t), 1e-9), 0.0), ok
+    return np.where(ok, np.sqrt(g2) / np.maximum(0.5 * (s + t), 1e-9), 0.0), ok
 
 
 def _streams(
@@ -142,16 +168,16 @@ def _streams(
     for c in np.unique(obs.cam_id):
         sel = np.flatnonzero(obs.cam_id == c)
         sel = sel[np.argsort(tau[sel], kind="stable")]
-        if sel.size < 2:
-            raise GttNetError(f"clock recovery: camera {int(c)} has {sel.size} image(s), needs at least 2")
+        if sel.size < 3:
+            raise GttNetError(f"clock recovery: camera {int(c)} has {sel.size} image(s), needs at least 3")
         out.append(
-            Stream(
-                camera=int(c),
-                images=sel,
-                tau=tau[sel],
-                rays=rays[sel],
-                centers=centers[sel],
-                visible=obs.visible[sel],
+            Stream.build(
+                int(c),
+                sel,
+                tau[sel],
+                rays[sel],
+                centers[sel],
+                obs.visible[sel],
                 kernel_s=kernel_frames / rates[int(c)],
                 max_gap_s=2.5 / rates[int(c)],
             )
@@ -160,14 +186,13 @@ def _streams(
 
 
 def _pair_errors(a: Stream, b: Stream, ia: np.ndarray, tq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Ray-meeting errors of ``a``'s frames ``ia`` (smoothed at their own times) against ``b`` smoothed at
-    ``tq``, shape ``(m, J)``; each divided by the square root of the pair's relative noise variance, so pure
-    noise scores alike at every shift."""
-    ra, ca, oka, va = a.smoothed
+    """Ray-meeting errors of ``a``'s smoothed frames ``ia`` against ``b`` interpolated at ``tq``, shape
+    ``(m, J)``; each divided by the square root of the pair's relative noise variance, so pure noise
+    scores alike at every shift."""
     rb, cb, okb, vb = b.at(tq)
-    err, ok = ray_meeting_error(ca[ia][:, None, :], ra[ia], cb[:, None, :], rb)
-    ok &= okb & oka[ia]
-    err = err / np.sqrt(va[ia] + vb)[:, None]
+    err, ok = ray_meeting_error(a.centers[:, ia, None], a.rays[:, ia], cb[:, :, None], rb)
+    ok &= okb & a.ok[ia]
+    err = err / np.sqrt(a.var[ia] + vb)[:, None]
     return np.where(ok, err, 0.0), ok
 
 
@@ -175,7 +200,7 @@ def _consensus(a: Stream, b: Stream, ia: np.ndarray, shifts: np.ndarray, cap: fl
     """Consensus score of each shift (``tau_b = tau_a + shift``): sum of ``(1 - (e / cap)^2)^2`` over
     meeting rays with ``e < cap``. Rewards overlap only where the rays agree."""
     score = np.empty(shifts.shape[0])
-    chunk = max(1, 200_000 // max(ia.size * a.rays.shape[1], 1))
+    chunk = max(1, 200_000 // max(ia.size * a.rays.shape[2], 1))
     for s0 in range(0, shifts.shape[0], chunk):
         sh = shifts[s0 : s0 + chunk]
         tq = (a.tau[ia][None, :] + sh[:, None]).ravel()
@@ -192,13 +217,13 @@ def pair_offset(
     *,
     cap: float,
     max_offset_s: float | None = None,
-    max_coarse_images: int = 80,
+    max_coarse_images: int = 48,
 ) -> tuple[float, float, float]:
     """Shift ``delta`` with ``tau_b = tau_a + delta`` at the same instant, from the ray-meeting consensus.
 
     A coarse grid (step: two frames of the faster camera) over every shift that leaves the streams
     overlapping (or ``|delta| <= max_offset_s``), on at most ``max_coarse_images`` frames of ``a``; a fine
-    grid (1/16 of the coarse step) around the best coarse shift on all frames; a parabola through the best
+    grid (1/8 of the coarse step) around the best coarse shift on all frames; a parabola through the best
     fine shift and its neighbours.
 
     Args:
@@ -230,7 +255,7 @@ def pair_offset(
     best = int(np.argmax(sc))
     far = np.abs(coarse - coarse[best]) > 2.0 * h
     ratio = float(sc[far].max() / sc[best]) if far.any() and sc[best] > 0 else 0.0
-    fine = coarse[best] + np.linspace(-1.5 * h, 1.5 * h, 49)
+    fine = coarse[best] + np.linspace(-1.5 * h, 1.5 * h, 25)
     all_a = np.arange(a.tau.shape[0])
     sf = _consensus(a, b, all_a, fine, cap)
     k = int(np.clip(np.argmax(sf), 1, fine.shape[0] - 2))
@@ -274,17 +299,26 @@ class _Refiner:
         d = np.concatenate([[0.0], p[v - 1 :]]) if self.drift else np.zeros(v)
         return o, d
 
-    def residuals(self, p: np.ndarray) -> np.ndarray:
+    def residuals(self, p: np.ndarray, only: int | None = None, base: np.ndarray | None = None) -> np.ndarray:
+        """All residuals; with ``only`` (a camera) and ``base`` (the residuals at other parameters), only the
+        pairs that involve camera ``only`` are recomputed (a Jacobian column)."""
         o, d = self.unpack(p)
-        out, nv = [], 0
+        out, nv, pos = [], 0, 0
         for i, j in self.pairs:
             a, b = self.s[i], self.s[j]
+            size = a.tau.shape[0] * a.rays.shape[2]
+            if only is not None and only not in (i, j):
+                out.append(base[pos : pos + size])
+                pos += size
+                continue
             t = o[i] + (1.0 + 1e-6 * d[i]) * a.tau
             tq = (t - o[j]) / (1.0 + 1e-6 * d[j])
             err, ok = _pair_errors(a, b, np.arange(a.tau.shape[0]), tq)
             out.append((err * self.f).ravel())
             nv += int(ok.sum())
-        self.n_valid = nv
+            pos += size
+        if only is None:
+            self.n_valid = nv
         return np.concatenate(out)
 
 
@@ -371,7 +405,11 @@ def recover_clocks(
 
         def jac(p):
             f0 = fun(p)
-            cols = [(ref.residuals(p + steps[q] * np.eye(p.size)[q]) - f0) / steps[q] for q in range(p.size)]
+            cam = [1 + q % (v - 1) for q in range(p.size)]  # parameter q moves camera cam[q]'s clock
+            cols = [
+                (ref.residuals(p + steps[q] * np.eye(p.size)[q], only=cam[q], base=f0) - f0) / steps[q]
+                for q in range(p.size)
+            ]
             return np.stack(cols, axis=1)
 
         x_scale = np.concatenate([np.full(v - 1, period), np.full(v - 1 if drift else 0, 100.0)])

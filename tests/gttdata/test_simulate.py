@@ -157,3 +157,21 @@ def test_simulation_is_deterministic_given_rng():
 def test_params_must_match_camera_count():
     with pytest.raises(ValueError, match="one rate per camera"):
         simulate_capture(_motion(), ring_rig(3), _params(4), np.random.default_rng(0), name="s")
+
+
+def test_cameras_started_seconds_before_the_capture():
+    """start_spread_s: every camera still films the whole window, its frame numbers count from its own start,
+    and frame k of camera v lies at offset_v + k / fps_v (drift 0, no jitter)."""
+    fps = (25.0, 30.0, 60.0, 25.0)
+    s = _simulate(seed=4, fps_hz=fps, start_spread_s=5.0, image_drop_rate=0.1)
+    offsets = np.asarray(s.meta["offsets_s"])
+    assert np.all(offsets < 0) and np.all(offsets > -5.0 - 1.0 / 25)
+    frame = np.asarray(s.meta["frame_number"])
+    for v in range(4):
+        sel = s.cam_id == v
+        np.testing.assert_allclose(s.timestamp_s[sel], offsets[v] + frame[sel] / fps[v], atol=2e-3)
+        first = int(np.ceil(-offsets[v] * fps[v] - 1e-9))
+        assert s.stream_index[sel].min() == first  # the video's index runs from the camera's start
+        # Dropped frames leave gaps in the camera's own counter, not in the video index.
+        assert np.all(np.diff(np.sort(s.stream_index[sel])) == 1)
+        assert s.timestamp_s[sel].max() > 2.4 and s.timestamp_s[sel].min() < 0.1

@@ -190,7 +190,7 @@ def test_drift_is_recovered_when_asked():
     obs, gt = make_view(cap, "partial")
     clocks = recover_clocks(obs, fps=30.0, estimate_drift=True)
     rel = clocks.drift_ppm - clocks.drift_ppm[0]
-    np.testing.assert_allclose(rel, [0.0, 3000.0, -3000.0], atol=500.0)
+    np.testing.assert_allclose(rel, [0.0, 3000.0, -3000.0], atol=800.0)  # 4 s: 3000 ppm is 0.36 frame
     assert np.abs(_frame_errors(obs, gt.timestamp_s, clocks)).max() < 0.1
 
 

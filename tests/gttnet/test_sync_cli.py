@@ -1,0 +1,79 @@
+"""``gttnet sync`` through click's CliRunner: JSON report, clocks file, frame-times CSV, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gttnet.cli import main
+from gttnet.sync import Clocks
+from tests.gttnet.test_sync import _capture
+
+
+@pytest.fixture(scope="module")
+def shard(tmp_path_factory):
+    writer = pytest.importorskip("gttdata.shards.writer")
+    out = tmp_path_factory.mktemp("sync_shard")
+    with writer.ShardWriter(out, split="test") as w:
+        w.write(_capture())
+    return sorted(out.glob("*.h5"))[0]
+
+
+def test_sync_json_and_clocks_file(tmp_path, shard):
+    out = tmp_path / "clocks.json"
+    r = CliRunner().invoke(main, ["sync", str(shard), "--fps", "25,30,60", "--out", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    assert [c["camera"] for c in rep["cameras"]] == [0, 1, 2]
+    assert [c["rate_hz"] for c in rep["cameras"]] == [25.0, 30.0, 60.0]
+    assert max(abs(e) for e in rep["offset_error_frames"]) < 0.1
+    clocks = Clocks.load(out)
+    np.testing.assert_allclose(clocks.offset_s, [c["offset_s"] for c in rep["cameras"]])
+    # Nothing is overwritten without --overwrite.
+    again = CliRunner().invoke(main, ["sync", str(shard), "--out", str(out)])
+    assert again.exit_code == 1 and "--overwrite" in again.output and "Traceback" not in again.output
+    human = CliRunner().invoke(
+        main, ["sync", str(shard), "--fps", "0=25,1=30,2=60", "--out", str(out), "--overwrite"]
+    )
+    assert human.exit_code == 0 and "offset std ms" in human.output
+
+
+def test_sync_frame_times_csv(tmp_path, shard):
+    from gttnet.io import load_input
+
+    obs = load_input(shard, sequencing="partial").observations
+    rate = np.array([25.0, 30.0, 60.0])
+    csv = tmp_path / "pts.csv"
+    lines = ["camera,frame,time_s"] + [
+        f"{c},{k},{k / rate[c] + 10.0 * c}" for c, k in zip(obs.cam_id, obs.stream_index, strict=True)
+    ]  # each camera's clock reads 10 s more than the last: offsets absorb it
+    csv.write_text("\n".join(lines) + "\n")
+    r = CliRunner().invoke(
+        main,
+        [
+            "sync",
+            str(shard),
+            "--frame-times",
+            str(csv),
+            "--fps",
+            "25,30,60",
+            "--out",
+            str(tmp_path / "c.json"),
+            "--json",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert max(abs(e) for e in json.loads(r.output)["offset_error_frames"]) < 0.1
+    csv.write_text("camera,frame,time_s\n0,0,abc\n")
+    bad = CliRunner().invoke(
+        main, ["sync", str(shard), "--frame-times", str(csv), "--out", str(tmp_path / "d.json")]
+    )
+    assert bad.exit_code == 1 and "line 2" in bad.output and "Traceback" not in bad.output
+
+
+def test_sync_bad_fps_is_a_usage_error(tmp_path, shard):
+    r = CliRunner().invoke(main, ["sync", str(shard), "--fps", "fast", "--out", str(tmp_path / "c.json")])
+    assert r.exit_code == 2 and "--fps" in r.output
