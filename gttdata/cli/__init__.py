@@ -1,9 +1,23 @@
-"""The ``gttdata`` command group; each subcommand lives in its own module."""
+"""The ``gttdata`` command group; each subcommand lives in its own module.
+
+Start-up rule (``gttdata --help`` must answer in well under 0.3 s): a module in this package imports only
+the standard library, click and ``gttdata.cli``/``gttdata.errors`` at module level. Everything heavier
+(numpy, scipy, OpenCV, h5py, matplotlib, yaml, tqdm, and the library modules that pull them in) is imported inside the command's function body,
+or inside the helper that needs it::
+
+    @click.command("mycmd")
+    def mycmd_cmd(...):
+        from gttdata.something import do_it  # imported only when the command runs
+
+        do_it(...)
+
+Type-only names go under ``if TYPE_CHECKING:``. ``tests/test_startup.py`` fails when ``import gttdata.cli``
+loads any of them, and ``benchmarks/bench_startup.py`` times ``--help``.
+"""
 
 from __future__ import annotations
 
 import functools
-import importlib.metadata as md
 
 import click
 
@@ -16,6 +30,8 @@ __all__ = ["main", "friendly_errors"]
 def _versions() -> str:
     names = ("gtt", "numpy", "scipy", "h5py", "opencv-python-headless", "click", "pyyaml")
     out = []
+    import importlib.metadata as md
+
     for n in names:
         try:
             out.append(f"{n} {md.version(n)}")
@@ -42,8 +58,22 @@ def friendly_errors(fn):
     return wrapper
 
 
+def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    click.echo(f"gttdata {_versions()}")
+    ctx.exit()
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="gtt", message=f"gttdata %(version)s ({_versions()})")
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_print_version,
+    help="Show the versions of gtt and its main dependencies, then exit.",
+)
 def main() -> None:
     """Simulate unsynchronized multi-camera captures from mocap and write them as HDF5 shards."""
 

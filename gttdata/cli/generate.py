@@ -6,22 +6,22 @@ import dataclasses
 import inspect
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from gttdata.cli import friendly_errors
-from gttdata.cli.inspect import format_summary
-from gttdata.cli.verify import repo_manifests_dir
-from gttdata.generation import generate_dataset, parse_shard_range, plan_blocks
-from gttdata.manifest import Manifest, register_manifest
-from gttdata.recipe import load_recipe
-from gttdata.shards.collection import DatasetReader
+
+if TYPE_CHECKING:
+    from gttdata.manifest import Manifest
 
 __all__ = ["generate_cmd", "register"]
 
 
 def _preview(manifest: Manifest, root: Path, n: int) -> None:
     """Render the first ``n`` samples of the first split with gttdata.preview.render, when installed."""
+    from gttdata.shards.collection import DatasetReader
+
     try:
         from gttdata.preview.render import render_samples
     except ImportError as exc:
@@ -80,6 +80,12 @@ def generate_cmd(
 
     Example: gttdata generate recipes/gttdata/tiny.yaml seed=3 --workers 2 --out /tmp/tiny
     """
+    from gttdata.cli.inspect import format_summary
+    from gttdata.cli.verify import repo_manifests_dir
+    from gttdata.generation import generate_dataset, parse_shard_range, plan_blocks
+    from gttdata.manifest import register_manifest
+    from gttdata.recipe import load_recipe
+
     recipe = load_recipe(recipe_path, overrides)
     if out is not None:
         recipe = dataclasses.replace(recipe, output_dir=str(out))

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from gttdata.cli import friendly_errors
-from gttdata.manifest import MANIFEST_NAME, Manifest, load_manifest, scan_shards
-from gttdata.shards.reader import ShardReader
-from gttdata.shards.schema import SAMPLES_GROUP, VARIANTS_GROUP
+
+if TYPE_CHECKING:
+    from gttdata.manifest import Manifest
 
 __all__ = ["format_summary", "inspect_cmd", "register"]
 
@@ -36,6 +37,9 @@ def format_summary(manifest: Manifest) -> list[str]:
 
 
 def _describe_dataset(root: Path) -> None:
+    from gttdata.manifest import MANIFEST_NAME, load_manifest, scan_shards
+    from gttdata.shards.reader import ShardReader
+
     if not (root / MANIFEST_NAME).exists():
         shards, tmps = scan_shards(root)
         click.echo(f"{root}: no {MANIFEST_NAME} (incomplete, or build it with: gttdata manifest {root})")
@@ -72,6 +76,9 @@ def _describe_dataset(root: Path) -> None:
 
 
 def _describe_shard(path: Path, sample: int) -> None:
+    from gttdata.shards.reader import ShardReader
+    from gttdata.shards.schema import SAMPLES_GROUP, VARIANTS_GROUP
+
     with ShardReader(path) as r:
         a = r.attrs
         click.echo(f"shard:     {path}")

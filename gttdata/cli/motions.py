@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-import numpy as np
 
 from gttdata.cli import friendly_errors
 from gttdata.errors import GttDataError
-from gttdata.mocap import format_for_path, load_motion
-from gttdata.mocap.fetch import cache_dir, fetch_motions, list_cached
-from gttdata.mocap.motion import Motion
+
+if TYPE_CHECKING:
+    from gttdata.mocap.motion import Motion
 
 __all__ = ["motions", "register", "standing_height_m", "summarise_motion"]
 
@@ -22,6 +22,8 @@ def standing_height_m(motion: Motion) -> float:
 
     Joints, not the body surface: the top joint is usually the head joint, so this sits below stature.
     """
+    import numpy as np
+
     z = motion.positions[..., 2]
     return float(np.percentile(z.max(axis=1) - z.min(axis=1), 95))
 
@@ -62,6 +64,8 @@ def motions() -> None:
 @friendly_errors
 def fetch_cmd(dest: Path | None) -> None:
     """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache."""
+    from gttdata.mocap.fetch import fetch_motions
+
     paths = fetch_motions(dest, progress=click.echo)
     click.echo(f"{len(paths)} motion files in {paths[0].parent if paths else dest}")
 
@@ -72,6 +76,9 @@ def fetch_cmd(dest: Path | None) -> None:
 )
 def list_cmd(dest: Path | None) -> None:
     """List the cached motion files with their frames, frame rate and joints."""
+    from gttdata.mocap import load_motion
+    from gttdata.mocap.fetch import cache_dir, list_cached
+
     cache = dest if dest is not None else cache_dir()
     files = list_cached(cache)
     if not files:
@@ -101,6 +108,9 @@ def list_cmd(dest: Path | None) -> None:
 @friendly_errors
 def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
     """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height."""
+    from gttdata.mocap import format_for_path, load_motion
+    from gttdata.mocap.fetch import cache_dir
+
     if not file.exists() and not file.is_absolute() and (cache_dir() / file).is_file():
         file = cache_dir() / file
     options = {}

@@ -7,7 +7,6 @@ from pathlib import Path
 import click
 
 from gttdata.cli import friendly_errors
-from gttdata.manifest import build_manifest, load_manifest, register_manifest, verify_manifest, write_manifest
 
 __all__ = ["manifest_cmd", "register", "repo_manifests_dir", "verify_cmd"]
 
@@ -28,6 +27,8 @@ def verify_cmd(root: Path, deep: bool) -> None:
 
     Exits with status 1 and one line per bad shard when anything differs.
     """
+    from gttdata.manifest import load_manifest, verify_manifest
+
     manifest = load_manifest(root)
     problems = verify_manifest(root, manifest, deep=deep)
     for line in problems:
@@ -47,6 +48,8 @@ def verify_cmd(root: Path, deep: bool) -> None:
 @friendly_errors
 def manifest_cmd(root: Path, register_: bool) -> None:
     """Build ROOT/manifest.json from complete shards (e.g. after array jobs ran with --shard-range)."""
+    from gttdata.manifest import build_manifest, register_manifest, verify_manifest, write_manifest
+
     manifest = build_manifest(root)
     path = write_manifest(manifest, root)
     problems = verify_manifest(root, manifest)

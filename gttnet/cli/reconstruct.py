@@ -8,7 +8,6 @@ import logging
 from pathlib import Path
 
 import click
-import numpy as np
 
 from gttdata.cli import friendly_errors
 
@@ -18,6 +17,8 @@ log = logging.getLogger(__name__)
 
 
 def _report(loaded, rec) -> dict:
+    import numpy as np
+
     from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
 
     out = {

@@ -8,7 +8,6 @@ import logging
 from pathlib import Path
 
 import click
-import numpy as np
 
 from gttdata.cli import friendly_errors
 
@@ -69,6 +68,8 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
     Example:
       gttnet segment recipes/gttdata/events.yaml --sample 2 --method dloe --out runs/segment
     """
+    import numpy as np
+
     from gttdata.capture.views import make_view
     from gttnet.apps.segment import score_segmentation, segment_capture
     from gttnet.evaluate.plots import plot_affinity

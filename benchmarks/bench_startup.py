@@ -1,0 +1,66 @@
+"""Benchmark of CLI start-up: wall time of ``gttnet --help`` and ``gttdata --help`` in fresh interpreters.
+
+Run:  python benchmarks/bench_startup.py [--runs 15]
+
+Each command runs ``--runs`` times as a subprocess (``python -m <package> --help``, the same interpreter as
+this script); the table shows the median, the spread (min..max) and the ratio to a bare ``python -c pass``
+measured in the same run, so a loaded machine shifts every row alike. ``--console-scripts`` also times the
+installed entry points found on PATH (which import the installed checkout, not necessarily this one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _time(cmd: list[str], runs: int, env: dict) -> list[float]:
+    out = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=env)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--runs", type=int, default=15)
+    p.add_argument("--console-scripts", action="store_true", help="Also time gttnet/gttdata found on PATH.")
+    args = p.parse_args()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
+    py = sys.executable
+    cases = {
+        "python -c pass (baseline)": [py, "-c", "pass"],
+        "gttnet --help": [py, "-m", "gttnet", "--help"],
+        "gttdata --help": [py, "-m", "gttdata", "--help"],
+        "gttnet reconstruct --help": [py, "-m", "gttnet", "reconstruct", "--help"],
+        "import torch (for scale)": [py, "-c", "import torch"],
+    }
+    if args.console_scripts:
+        for name in ("gttnet", "gttdata"):
+            exe = shutil.which(name)
+            if exe:
+                cases[f"{exe} --help"] = [exe, "--help"]
+    rows = []
+    for name, cmd in cases.items():
+        _time(cmd, 1, env)  # warm the file cache
+        rows.append((name, _time(cmd, args.runs, env)))
+    base = statistics.median(rows[0][1])
+    print(f"| command | median s | min..max s | vs bare python |  ({args.runs} runs each)")
+    print("|---|---|---|---|")
+    for name, t in rows:
+        med = statistics.median(t)
+        print(f"| `{name}` | {med:.3f} | {min(t):.3f}..{max(t):.3f} | {med / base:.1f}x |")
+
+
+if __name__ == "__main__":
+    main()
