@@ -28,6 +28,8 @@ def _report(loaded, rec) -> dict:
         "n_joints": rec.n_joints,
         "seconds": round(float(rec.seconds), 4),
     }
+    if "windows" in rec.info:
+        out["windows"] = rec.info["windows"]
     gt = loaded.ground_truth
     if gt is not None:
         out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt.points3d), 4)
@@ -37,6 +39,21 @@ def _report(loaded, rec) -> dict:
 
 
 _PROJECT_SUFFIXES = (".toml", ".yaml", ".yml")
+
+
+def _window_arg(value: str) -> int | str | None:
+    """``--window``: ``"auto"``, None for ``off``, or an image count >= 2."""
+    if value in ("auto", "off"):
+        return None if value == "off" else value
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if n < 2:
+        raise click.BadParameter(
+            f"expected auto, off or an integer >= 2, got {value!r}", param_hint="--window"
+        )
+    return n
 
 
 def _method_default() -> str:
@@ -58,6 +75,8 @@ def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
 
 
 def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json):
+    import numpy as np
+
     from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
     from gttnet.io.output import write_reconstruction
 
@@ -94,6 +113,8 @@ def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recordi
 def _timing_options(method: str, view) -> dict:
     """Known per-camera timing for methods that take it (clock recovery: ``frame_times_s``, ``fps``)."""
     import inspect
+
+    import numpy as np
 
     from gttnet.baselines.registry import method_spec
 
@@ -315,6 +336,17 @@ def _resolve_input(
     help="Subjects per image with no identity across images (2: joints are two stacked skeletons; "
     "their order is shuffled per image, then clustered by affinity).",
 )
+@click.option(
+    "--window",
+    default="auto",
+    show_default=True,
+    metavar="auto|off|N",
+    help="Windowed reconstruction of long partial/full captures: N images per window (a quarter "
+    "overlapping), auto (80 per camera above 2,000 images), or off (one piece).",
+)
+@click.option(
+    "--progress/--no-progress", default=True, show_default=True, help="Window progress bar on stderr."
+)
 @friendly_errors
 def reconstruct_cmd(
     input_paths,
@@ -339,6 +371,8 @@ def reconstruct_cmd(
     model_path,
     seed,
     subjects,
+    window,
+    progress,
 ):
     """Reconstruct the 3D joints of a recording or an INPUT file and recover the image order.
 
@@ -357,6 +391,7 @@ def reconstruct_cmd(
     from gttnet.baselines.registry import check_sequencing, method_spec, reconstruct
 
     method = method or _method_default()
+    window_arg = _window_arg(window)
     try:
         spec_m = method_spec(method)
     except ValueError as exc:
@@ -393,6 +428,13 @@ def reconstruct_cmd(
             rec, summary = reconstruct_loaded_subjects(
                 loaded, method=method, n_subjects=subjects, seed=seed or 0, **options
             )
+        elif window_arg is not None:
+            from gttnet.windowed import reconstruct_windowed
+
+            rec = reconstruct_windowed(
+                obs, method, window=window_arg, progress=progress, **_timing_options(method, view), **options
+            )
+            summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
         else:
             rec = reconstruct(obs, method, **_timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
@@ -431,6 +473,8 @@ def _report_recording(view, rec, gt_points) -> dict:
         "seconds": round(float(rec.seconds), 4),
         "observed_fraction": round(float(obs.visible.mean()), 4),
     }
+    if "windows" in rec.info:
+        out["windows"] = rec.info["windows"]
     if gt_points is not None:
         out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt_points), 4)
     return out

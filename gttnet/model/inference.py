@@ -122,14 +122,22 @@ class GTTNetReconstructor:
             pinned for the bundled model). A finite, noise-aware value
             (:func:`gttnet.solvers.xstep.noise_aware_lambda2`) lets joints leave their rays by about the
             pixel noise; the learned affinity is unchanged.
+        candidates: Neighbour search under ``none`` sequencing (see
+            :func:`gttnet.model.inputs.prepare_inputs`): ``"auto"``, ``"dense"`` or ``"kdtree"``.
     """
 
     def __init__(
-        self, model_path: str | Path | None = None, *, device: str = "auto", lambda2: float | None = None
+        self,
+        model_path: str | Path | None = None,
+        *,
+        device: str = "auto",
+        lambda2: float | None = None,
+        candidates: str = "auto",
     ) -> None:
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(device)
+        self.candidates = candidates
         self.model = load_model(model_path, device=self.device)
         if lambda2 is not None:
             self.model.config = dataclasses.replace(self.model.config, lambda2=float(lambda2))
@@ -146,7 +154,7 @@ class GTTNetReconstructor:
         """
         if not isinstance(obs, Observations):
             raise TypeError(f"GTTNetReconstructor takes Observations, got {type(obs).__name__}")
-        seq = prepare_inputs(obs, k=self.model.config.k).to(self.device)
+        seq = prepare_inputs(obs, k=self.model.config.k, candidates=self.candidates).to(self.device)
         out = self.model([seq], solve=True)[0]
         return Reconstruction(
             points3d=out.x_est.double().cpu().numpy(),
@@ -155,20 +163,20 @@ class GTTNetReconstructor:
         )
 
 
-_CACHE: dict[tuple[str, str], GTTNetReconstructor] = {}
+_CACHE: dict[tuple[str, str, str], GTTNetReconstructor] = {}
 
 
 @register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
 def reconstruct_gttnet(
-    obs: Observations, model: str | None = None, lambda2: float | None = None
+    obs: Observations, model: str | None = None, lambda2: float | None = None, candidates: str = "auto"
 ) -> Reconstruction:
     """GTT-Net with the bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31
     model for CMU-31, the PointNet model otherwise), or the model file/run directory ``model``;
-    ``lambda2`` as in :class:`GTTNetReconstructor`."""
+    ``lambda2`` and ``candidates`` as in :class:`GTTNetReconstructor`."""
     if model is None:
         model = str(bundled_model_for(obs.skeleton))
-    key = (str(model), str(lambda2))
+    key = (str(model), str(lambda2), candidates)
     if key not in _CACHE:
-        _CACHE[key] = GTTNetReconstructor(model, lambda2=lambda2)
+        _CACHE[key] = GTTNetReconstructor(model, lambda2=lambda2, candidates=candidates)
     rec = _CACHE[key](obs)
     return Reconstruction(points3d=rec.points3d, affinity=np.asarray(rec.affinity), info=rec.info)

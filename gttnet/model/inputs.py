@@ -9,7 +9,7 @@ import torch
 
 from gttdata.capture.views import Observations
 
-__all__ = ["SequenceInput", "prepare_inputs", "random_rotation"]
+__all__ = ["DENSE_MAX_IMAGES", "SequenceInput", "prepare_inputs", "random_rotation"]
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,14 @@ def random_rotation(rng: np.random.Generator, *, mode: str = "so3") -> np.ndarra
     )
 
 
-def prepare_inputs(obs: Observations, *, k: int, dtype: torch.dtype = torch.float32) -> SequenceInput:
+#: Under ``none`` sequencing, captures with more images than this find neighbours with the k-d tree
+#: candidate search (:mod:`gttnet.geometry.candidates`) instead of the dense pairwise search.
+DENSE_MAX_IMAGES = 600
+
+
+def prepare_inputs(
+    obs: Observations, *, k: int, dtype: torch.dtype = torch.float32, candidates: str = "auto"
+) -> SequenceInput:
     """Pseudo-triangulate, build neighbourhoods and pack an :class:`Observations` for the network.
 
     The neighbourhood respects the sequencing condition (under ``none`` no stream order is used); the
@@ -104,6 +111,9 @@ def prepare_inputs(obs: Observations, *, k: int, dtype: torch.dtype = torch.floa
         obs: Solver inputs for one sequencing condition.
         k: Neighbours per image K.
         dtype: Floating dtype of the tensors.
+        candidates: Neighbour search under ``none`` sequencing: ``"dense"`` (all pairs), ``"kdtree"``
+            (epipolar-descriptor candidates, :func:`~gttnet.geometry.candidates.candidate_pseudo_triangulate`)
+            or ``"auto"`` (k-d tree above :data:`DENSE_MAX_IMAGES` images). Other conditions use dense.
 
     Returns:
         A :class:`SequenceInput` on the CPU.
@@ -111,18 +121,29 @@ def prepare_inputs(obs: Observations, *, k: int, dtype: torch.dtype = torch.floa
     from gttnet.geometry.neighbours import chain_affinity, neighbourhoods
     from gttnet.geometry.triangulation import pseudo_triangulate
 
+    if candidates not in ("auto", "dense", "kdtree"):
+        raise ValueError(f"candidates must be 'auto', 'dense' or 'kdtree', got {candidates!r}")
     centers = obs.centers()
     rays = obs.rays()
-    pt = pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
-    nbr = neighbourhoods(
-        pt.cost,
-        sequencing=obs.sequencing,
-        cam_id=obs.cam_id,
-        stream_index=obs.stream_index,
-        timestamp_s=obs.timestamp_s,
-        k=k,
-        order=pt.order,
+    use_tree = obs.sequencing == "none" and (
+        candidates == "kdtree" or (candidates == "auto" and obs.n_images > DENSE_MAX_IMAGES)
     )
+    if use_tree:
+        from gttnet.geometry.candidates import candidate_pseudo_triangulate
+
+        pt = candidate_pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
+        nbr = pt.neighbours(k)
+    else:
+        pt = pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
+        nbr = neighbourhoods(
+            pt.cost,
+            sequencing=obs.sequencing,
+            cam_id=obs.cam_id,
+            stream_index=obs.stream_index,
+            timestamp_s=obs.timestamp_s,
+            k=k,
+            order=pt.order,
+        )
     chain = None
     if obs.sequencing == "partial":
         chain = torch.as_tensor(np.asarray(chain_affinity(obs.cam_id, obs.stream_index)), dtype=dtype)

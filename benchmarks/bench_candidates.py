@@ -1,0 +1,154 @@
+"""Benchmark of the k-d tree candidate search against the dense pairwise search (``none`` sequencing).
+
+Run:  python benchmarks/bench_candidates.py [--window-s 12] [--n-seq 8] [--runs 3]
+
+Data: test samples of the paper recipe with a longer window (12 s = 1,440 images of 4 cameras at 30 Hz),
+built in memory; samples where fewer than 90 % of the joints are observed (the subject leaves the
+camera ring) are skipped, a choice made on the observations alone. For each search the table gives, as
+medians over sequences (min..max in brackets):
+
+* seconds of pseudo-triangulation + neighbourhoods (median of ``--runs`` runs per sequence);
+* recall of the dense search's K = 20 neighbours (``vs dense``);
+* recall of the true temporal neighbours: the share of an image's K neighbours that are among the K
+  images of other cameras nearest to it in true time (ground truth used for scoring only);
+* X_init error (MPJPE, mm) and GTT-Net's MPJPE (mm, bundled model) and seconds with that search;
+* the ratio of DLOE's seconds to GTT-Net's, both measured on the same sequences in this run.
+
+BLAS and torch are pinned to one thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+import gttnet.geometry.candidates as cand_mod  # noqa: E402
+from gttdata.capture.views import make_view  # noqa: E402
+from gttdata.generate_plan import build_sample  # noqa: E402
+from gttdata.recipe import load_recipe  # noqa: E402
+from gttnet.baselines import reconstruct  # noqa: E402
+from gttnet.evaluate.metrics import mpjpe_mm  # noqa: E402
+from gttnet.geometry.candidates import candidate_pseudo_triangulate  # noqa: E402
+from gttnet.geometry.neighbours import neighbourhoods  # noqa: E402
+from gttnet.geometry.triangulation import pseudo_triangulate  # noqa: E402
+
+K = 20
+
+
+def true_neighbours(t: np.ndarray, cam: np.ndarray, k: int) -> np.ndarray:
+    """The k other-camera images nearest in true time, shape ``(N, k)`` (ground truth: scoring only)."""
+    order = np.argsort(t, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(t.size)
+    out = np.empty((t.size, k), dtype=np.int64)
+    w = 4 * k
+    for i in range(t.size):
+        lo, hi = max(rank[i] - w, 0), min(rank[i] + w + 1, t.size)
+        win = order[lo:hi]
+        win = win[cam[win] != cam[i]]
+        out[i] = win[np.argsort(np.abs(t[win] - t[i]), kind="stable")[:k]]
+    return out
+
+
+def recall(found: np.ndarray, ref: np.ndarray) -> float:
+    return float(np.mean([len(set(a[a >= 0]) & set(b)) / len(b) for a, b in zip(found, ref, strict=True)]))
+
+
+def fmt(xs: list[float], spec: str = ".2f") -> str:
+    return f"{statistics.median(xs):{spec}} ({min(xs):{spec}}..{max(xs):{spec}})"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--recipe", default="recipes/gttdata/paper.yaml")
+    p.add_argument("--window-s", type=float, default=12.0)
+    p.add_argument("--n-seq", type=int, default=8)
+    p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--no-dloe", action="store_true")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    recipe = load_recipe(args.recipe, [f"capture.window_s={args.window_s}"])
+    searches = {
+        "dense": None,
+        "kdtree (12 + pose 8)": {"per_camera": 12, "pose_per_camera": 8},
+        "kdtree (8 + pose 8)": {"per_camera": 8, "pose_per_camera": 8},
+        "kdtree (12, no pose round)": {"per_camera": 12, "pose_per_camera": 0},
+    }
+    rows = {
+        name: {k: [] for k in ("sec", "vs_dense", "temporal", "xinit", "gtt", "gtt_sec")} for name in searches
+    }
+    dloe_sec: list[float] = []
+    dloe_err: list[float] = []
+    n_used = idx = 0
+    while n_used < args.n_seq and idx < 10 * args.n_seq:
+        sample = build_sample(recipe, "test", idx)[0]
+        idx += 1
+        obs, gt = make_view(sample, "none")
+        if obs.visible.mean() < 0.9:
+            continue
+        n_used += 1
+        C, r = obs.centers(), obs.rays()
+        truth = true_neighbours(gt.timestamp_s, obs.cam_id, K)
+        dense_nb = None
+        for name, opts in searches.items():
+            times = []
+            for _ in range(args.runs):
+                t0 = time.perf_counter()
+                if opts is None:
+                    pt = pseudo_triangulate(C, r, obs.visible, obs.cam_id)
+                    nb = neighbourhoods(pt.cost, sequencing="none", cam_id=obs.cam_id, k=K, order=pt.order)
+                else:
+                    pt = candidate_pseudo_triangulate(C, r, obs.visible, obs.cam_id, **opts)
+                    nb = pt.neighbours(K)
+                times.append(time.perf_counter() - t0)
+            if opts is None:
+                dense_nb = nb
+            row = rows[name]
+            row["sec"].append(statistics.median(times))
+            row["vs_dense"].append(recall(nb, dense_nb))
+            row["temporal"].append(recall(nb, truth))
+            row["xinit"].append(mpjpe_mm(pt.X_init, gt.points3d))
+            # GTT-Net with this search: the k-d tree options are passed through prepare_inputs.
+            orig = cand_mod.candidate_pseudo_triangulate
+            if opts is not None:
+                cand_mod.candidate_pseudo_triangulate = lambda *a, _o=opts, _f=orig, **kw: _f(
+                    *a, **{**kw, **_o}
+                )
+            try:
+                rec = reconstruct(obs, "gttnet", candidates="dense" if opts is None else "kdtree")
+            finally:
+                cand_mod.candidate_pseudo_triangulate = orig
+            row["gtt"].append(mpjpe_mm(rec.points3d, gt.points3d))
+            row["gtt_sec"].append(rec.seconds)
+        if not args.no_dloe:
+            rec = reconstruct(obs, "dloe")
+            dloe_sec.append(rec.seconds)
+            dloe_err.append(mpjpe_mm(rec.points3d, gt.points3d))
+        print(f"sequence {idx - 1}: {obs.n_images} images done", flush=True)
+    print(f"\n{n_used} sequences of {obs.n_images} images, none sequencing, K = {K}; median (min..max)")
+    print(
+        "| search | pseudo-tri + neighbours s | recall vs dense | temporal recall | X_init mm | GTT-Net mm | GTT-Net s |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for name, row in rows.items():
+        print(
+            f"| {name} | {fmt(row['sec'], '.3f')} | {fmt(row['vs_dense'])} | {fmt(row['temporal'])} | "
+            f"{fmt(row['xinit'], '.1f')} | {fmt(row['gtt'], '.1f')} | {fmt(row['gtt_sec'])} |"
+        )
+    if dloe_sec:
+        print(f"\nDLOE (dense, its default): {fmt(dloe_sec)} s, MPJPE {fmt(dloe_err, '.1f')} mm")
+        for name, row in rows.items():
+            ratios = [d / g for d, g in zip(dloe_sec, row["gtt_sec"], strict=True)]
+            print(f"DLOE / GTT-Net ({name}): {fmt(ratios, '.1f')}x (per-sequence ratios)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,292 @@
+"""Windowed reconstruction of long recordings: overlapping time windows, each solved alone, stitched.
+
+Every method's cost grows with the square of the image count (pairwise pseudo-triangulation, an
+``N x N`` affinity, a structure solve over all images), so a 10-minute capture of 4 cameras at 30 Hz
+(72,000 images) cannot be solved in one piece. Under ``partial`` and ``full`` sequencing the images can
+be placed roughly in time, so the recording is cut into overlapping windows, each window is
+reconstructed with the chosen method as an ordinary capture of the same sequencing condition, and the
+windows are blended in their overlaps. Time and memory are then linear in the number of images.
+
+Placing images in time (:func:`approximate_times`):
+
+* ``full``: the timestamps.
+* ``partial``: the streams' relative timing is unknown, only each stream's own order. Each image is
+  placed at its stream's elapsed fraction, ``(rank in stream + 0.5) / images in stream``, which
+  assumes the streams span the same recording at constant rates. Window overlaps absorb an offset of
+  up to ``overlap / (2 V)`` frames per camera (V cameras). Captures whose cameras started and stopped
+  at different times need recovered clocks first (pass ``times``).
+
+Window length (``window="auto"``, :func:`auto_window`): ``80 V`` images (320 for 4 cameras, ~2.7 s
+at 30 Hz each) with a quarter of it as overlap. That is the length the bundled GTT-Net model and the
+DLOE defaults were tuned on (~300-image sequences), every image keeps its K = 20 neighbours within the
+window, and the per-window quadratic cost stays a fraction of a second. Captures of at most
+:data:`AUTO_MIN_IMAGES` images are solved in one piece; ``benchmarks/bench_windowed.py`` compares
+windowed and unwindowed accuracy.
+
+Stitching: inside a window, an image's weight rises linearly over the first ``overlap`` images and
+falls over the last ``overlap`` (full weight elsewhere and at the recording's ends); each image's
+joints are the weighted mean of its windows' estimates. The recovered order is the image's rank within
+the window where its weight is largest, offset by that window's start (windows' local orders, from
+their affinities, are flipped to agree with the approximate times).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from gttdata.capture.views import Observations
+from gttnet.baselines.registry import Reconstruction, check_sequencing, method_spec
+
+__all__ = [
+    "AUTO_MIN_IMAGES",
+    "WindowPlan",
+    "approximate_times",
+    "auto_window",
+    "plan_windows",
+    "reconstruct_windowed",
+    "subset_observations",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``window="auto"`` solves captures of at most this many images in one piece.
+AUTO_MIN_IMAGES = 2000
+
+#: Images per camera in an automatic window.
+_PER_CAMERA = 80
+
+
+@dataclass(frozen=True)
+class WindowPlan:
+    """Overlapping windows over N images.
+
+    Args:
+        order: Images sorted by approximate time, shape ``(N,)`` int64.
+        starts: First position (in ``order``) of each window, shape ``(W,)`` int64.
+        length: Images per window (the last window may be shorter only when N is).
+        overlap: Images shared by consecutive windows (at least; the last window is aligned to the end).
+    """
+
+    order: np.ndarray
+    starts: np.ndarray
+    length: int
+    overlap: int
+
+    def __len__(self) -> int:
+        return int(self.starts.shape[0])
+
+    def window(self, w: int) -> np.ndarray:
+        """Image indices of window ``w`` in approximate time order, shape ``(<= length,)``."""
+        s = int(self.starts[w])
+        return self.order[s : s + self.length]
+
+    def weights(self, w: int) -> np.ndarray:
+        """Blending weight of each image of window ``w`` (linear ramps over the overlaps), in (0, 1]."""
+        s = int(self.starts[w])
+        m = min(self.length, self.order.shape[0] - s)
+        pos = np.arange(m, dtype=np.float64)
+        ramp = float(self.overlap + 1)
+        up = np.ones(m) if w == 0 else np.minimum(1.0, (pos + 1.0) / ramp)
+        down = np.ones(m) if w == len(self) - 1 else np.minimum(1.0, (m - pos) / ramp)
+        return np.minimum(up, down)
+
+
+def approximate_times(obs: Observations) -> np.ndarray:
+    """A rough time of each image, for cutting windows (see the module docstring), shape ``(N,)``.
+
+    Returns seconds under ``full`` and the stream's elapsed fraction in ``[0, 1)`` under ``partial``.
+
+    Raises:
+        ValueError: Under ``none`` sequencing (no time information).
+    """
+    if obs.sequencing == "full":
+        return np.asarray(obs.timestamp_s, dtype=np.float64)
+    if obs.sequencing != "partial":
+        raise ValueError("windowed reconstruction needs 'partial' or 'full' sequencing (image order in time)")
+    cam = np.asarray(obs.cam_id)
+    order = np.lexsort((np.asarray(obs.stream_index), cam))
+    t = np.empty(cam.shape[0])
+    for c in np.unique(cam):
+        idx = order[cam[order] == c]
+        t[idx] = (np.arange(idx.size) + 0.5) / idx.size
+    return t
+
+
+def auto_window(obs: Observations) -> tuple[int, int]:
+    """``(length, overlap)`` of automatic windows: ``80 V`` images for V cameras, a quarter overlapping."""
+    v = max(int(np.unique(obs.cam_id).size), 1)
+    length = _PER_CAMERA * v
+    return length, length // 4
+
+
+def plan_windows(times: np.ndarray, length: int, overlap: int) -> WindowPlan:
+    """Cut images sorted by ``times`` into windows of ``length`` with at least ``overlap`` shared.
+
+    Args:
+        times: Approximate time per image, shape ``(N,)``.
+        length: Images per window (>= 2).
+        overlap: Images shared by consecutive windows, ``0 <= overlap < length``.
+
+    Example:
+        >>> plan_windows(np.arange(10.0), 4, 1).starts.tolist()
+        [0, 3, 6]
+    """
+    if length < 2 or not 0 <= overlap < length:
+        raise ValueError(f"window length must be >= 2 and 0 <= overlap < length, got {length} and {overlap}")
+    n = int(np.shape(times)[0])
+    order = np.argsort(np.asarray(times), kind="stable").astype(np.int64)
+    if n <= length:
+        return WindowPlan(order=order, starts=np.zeros(1, dtype=np.int64), length=length, overlap=overlap)
+    stride = length - overlap
+    starts = list(range(0, n - length + 1, stride))
+    if starts[-1] + length < n:
+        starts.append(n - length)
+    return WindowPlan(order=order, starts=np.asarray(starts, dtype=np.int64), length=length, overlap=overlap)
+
+
+def subset_observations(obs: Observations, idx: np.ndarray) -> tuple[Observations, np.ndarray]:
+    """The images ``idx`` as a capture of their own, in the order the sequencing condition prescribes.
+
+    Returns:
+        ``(observations, rows)``: the sub-capture and, for each of its images, the index in ``obs``.
+    """
+    idx = np.asarray(idx, dtype=np.int64)
+    if obs.sequencing == "partial":
+        rows = idx[np.lexsort((obs.stream_index[idx], obs.cam_id[idx]))]
+    elif obs.sequencing == "full":
+        rows = idx[np.argsort(obs.timestamp_s[idx], kind="stable")]
+    else:
+        rows = np.sort(idx)
+    sub = replace(
+        obs,
+        cam_id=obs.cam_id[rows],
+        K=obs.K[rows],
+        cam_from_world=obs.cam_from_world[rows],
+        keypoints_px=obs.keypoints_px[rows],
+        visible=obs.visible[rows],
+        stream_index=None if obs.stream_index is None else obs.stream_index[rows],
+        timestamp_s=None if obs.timestamp_s is None else obs.timestamp_s[rows],
+    )
+    return sub, rows
+
+
+def _local_rank(rec: Reconstruction, t_local: np.ndarray) -> np.ndarray:
+    """Rank of each window image in time: the method's order (else its affinity's), else ``t_local``."""
+    n = t_local.shape[0]
+    order = rec.order
+    if order is None and rec.affinity is not None:
+        from gttnet.geometry.ordering import spectral_order
+
+        try:
+            order = spectral_order(rec.affinity)
+        except Exception as exc:  # a disconnected window affinity: fall back to the rough times
+            log.debug("window order from approximate times (%s)", exc)
+            order = None
+    t_rank = np.empty(n, dtype=np.int64)
+    t_rank[np.argsort(t_local, kind="stable")] = np.arange(n)
+    if order is None:
+        return t_rank
+    order = np.asarray(order, dtype=np.int64)
+    if np.corrcoef(order, t_rank)[0, 1] < 0:
+        order = n - 1 - order
+    return order
+
+
+def reconstruct_windowed(
+    obs: Observations,
+    method: str,
+    *,
+    window: int | str = "auto",
+    overlap: int | None = None,
+    times: np.ndarray | None = None,
+    progress: bool = False,
+    **options,
+) -> Reconstruction:
+    """Reconstruct a long capture window by window with a registered method, then stitch the windows.
+
+    Args:
+        obs: Observations under ``partial`` or ``full`` sequencing (``none`` is solved in one piece).
+        method: Registered method name.
+        window: Images per window, or ``"auto"`` (:func:`auto_window`, and one piece for captures of at
+            most :data:`AUTO_MIN_IMAGES` images).
+        overlap: Images shared by consecutive windows (default: a quarter of the window).
+        times: Approximate time of each image, shape ``(N,)`` (e.g. recovered clocks); default
+            :func:`approximate_times`.
+        progress: Show a progress bar with ETA on stderr.
+        **options: Options of the method.
+
+    Returns:
+        The stitched reconstruction: ``points3d`` (N, J, 3), ``order`` (N,), no affinity (it would be
+        ``N x N``); ``info`` holds the windows' count, length and overlap.
+    """
+    spec = method_spec(method)
+    check_sequencing(obs, spec)
+    n = obs.n_images
+    if window == "auto":
+        if obs.sequencing == "none" or n <= AUTO_MIN_IMAGES:
+            from gttnet.baselines.registry import reconstruct
+
+            return reconstruct(obs, method, **options)
+        length, auto_overlap = auto_window(obs)
+    else:
+        length, auto_overlap = int(window), int(window) // 4
+    ov = auto_overlap if overlap is None else int(overlap)
+    t_hat = approximate_times(obs) if times is None else np.asarray(times, dtype=np.float64)
+    if t_hat.shape != (n,):
+        raise ValueError(f"times must have shape ({n},), got {t_hat.shape}")
+    plan = plan_windows(t_hat, length, ov)
+    from tqdm import tqdm
+
+    X = np.zeros((n, obs.n_joints, 3))
+    wsum = np.zeros(n)
+    best_w = np.full(n, -1.0)
+    key = np.zeros(n)
+    t0 = time.perf_counter()
+    bar = tqdm(
+        total=n,
+        unit="img",
+        desc=f"{method} windows",
+        disable=not progress,
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
+    done = 0
+    for w in range(len(plan)):
+        sub, rows = subset_observations(obs, plan.window(w))
+        rec = spec.fn(sub, **options)
+        win = plan.window(w)
+        srt = np.argsort(win)
+        weight = plan.weights(w)[srt[np.searchsorted(win[srt], rows)]]
+        X[rows] += weight[:, None, None] * np.asarray(rec.points3d)
+        wsum[rows] += weight
+        rank = _local_rank(rec, t_hat[rows])
+        better = weight > best_w[rows]
+        key[rows[better]] = plan.starts[w] + rank[better]
+        best_w[rows[better]] = weight[better]
+        new = int(min(plan.starts[w] + plan.length, n) - done) if w < len(plan) - 1 else n - done
+        bar.update(max(new, 0))
+        done += max(new, 0)
+    bar.close()
+    X /= wsum[:, None, None]
+    order = np.empty(n, dtype=np.int64)
+    order[np.lexsort((t_hat, key))] = np.arange(n)
+    info = {
+        "windows": len(plan),
+        "window": plan.length,
+        "overlap": plan.overlap,
+        "seconds_per_window": (time.perf_counter() - t0) / len(plan),
+    }
+    return Reconstruction(
+        points3d=X,
+        affinity=None,
+        order=order,
+        seconds=time.perf_counter() - t0,
+        method=method,
+        sequencing=obs.sequencing,
+        info=info,
+    )

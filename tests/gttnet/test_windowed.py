@@ -1,0 +1,104 @@
+"""Tests of windowed reconstruction: window plans, approximate times, stitching, and the CLI option."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gttdata.capture.views import make_view
+from gttnet.baselines import reconstruct
+from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+from gttnet.windowed import (
+    approximate_times,
+    auto_window,
+    plan_windows,
+    reconstruct_windowed,
+    subset_observations,
+)
+
+
+@pytest.mark.parametrize(("n", "length", "overlap"), [(10, 4, 1), (100, 32, 8), (33, 32, 8), (5, 8, 2)])
+def test_plan_covers_every_image_with_the_overlap(n, length, overlap):
+    plan = plan_windows(np.random.default_rng(0).permutation(n).astype(float), length, overlap)
+    seen = np.zeros(n, int)
+    for w in range(len(plan)):
+        idx = plan.window(w)
+        assert idx.size == min(length, n)
+        seen[idx] += 1
+        wt = plan.weights(w)
+        assert wt.shape == idx.shape and np.all((wt > 0) & (wt <= 1))
+        if w > 0:
+            shared = np.intersect1d(idx, plan.window(w - 1)).size
+            assert shared >= overlap
+    assert np.all(seen >= 1)
+    assert np.all(np.diff(plan.starts) <= length - overlap)
+    with pytest.raises(ValueError, match="overlap"):
+        plan_windows(np.arange(5.0), 4, 4)
+
+
+def test_approximate_times_partial_is_the_stream_fraction(scene_factory):
+    obs, gt = make_view(scene_factory(n_cameras=3, frames_per_camera=10), "partial")
+    t = approximate_times(obs)
+    for c in range(3):
+        m = obs.cam_id == c
+        assert sorted(t[m].tolist()) == pytest.approx((np.arange(10) + 0.5) / 10)
+        assert np.all(np.diff(t[m][np.argsort(obs.stream_index[m])]) > 0)
+    # The staggered cameras of the scene are within one frame of each other on this axis.
+    assert np.abs(t - (gt.timestamp_s - gt.timestamp_s.min()) / np.ptp(gt.timestamp_s)).max() < 0.12
+    obs_none, _ = make_view(scene_factory(), "none")
+    with pytest.raises(ValueError, match="partial"):
+        approximate_times(obs_none)
+    assert auto_window(obs) == (240, 60)
+
+
+def test_subset_keeps_the_sequencing_layout(scene_factory):
+    obs, _ = make_view(scene_factory(n_cameras=3, frames_per_camera=10), "partial")
+    sub, rows = subset_observations(obs, np.array([20, 3, 11, 0, 25]))
+    assert sorted(rows.tolist()) == [0, 3, 11, 20, 25]
+    key = list(zip(sub.cam_id.tolist(), sub.stream_index.tolist(), strict=True))
+    assert key == sorted(key)
+    np.testing.assert_array_equal(sub.keypoints_px, obs.keypoints_px[rows])
+
+
+@pytest.mark.parametrize("sequencing", ["full", "partial"])
+def test_windowed_matches_unwindowed(scene_factory, sequencing):
+    sample = scene_factory(n_cameras=4, n_joints=8, frames_per_camera=40, sigma_px=1.0, missing=0.1, seed=6)
+    obs, gt = make_view(sample, sequencing)
+    whole = reconstruct(obs, "pseudo")
+    one = reconstruct_windowed(obs, "pseudo", window=obs.n_images)
+    np.testing.assert_allclose(one.points3d, whole.points3d)
+    rec = reconstruct_windowed(obs, "pseudo", window=48, overlap=16)
+    assert rec.info["windows"] > 3 and rec.affinity is None
+    assert rec.points3d.shape == whole.points3d.shape
+    assert mpjpe_mm(rec.points3d, gt.points3d) < 1.1 * mpjpe_mm(whole.points3d, gt.points3d)
+    assert kendall_tau(rec.order, gt.global_order) > 0.9
+    assert sorted(rec.order.tolist()) == list(range(obs.n_images))
+
+
+def test_auto_keeps_small_captures_in_one_piece(scene_factory):
+    obs, _ = make_view(scene_factory(n_cameras=3, frames_per_camera=10), "full")
+    rec = reconstruct_windowed(obs, "pseudo")
+    assert "windows" not in rec.info and rec.affinity is not None
+
+
+def test_cli_window_option(tmp_path, scene_factory):
+    from click.testing import CliRunner
+
+    from gttdata.shards.writer import ShardWriter
+    from gttnet.cli import main
+
+    sample = scene_factory(n_cameras=4, n_joints=6, frames_per_camera=30, sigma_px=1.0, seed=4)
+    with ShardWriter(tmp_path / "shards", split="test") as w:
+        w.write(sample)
+    shard = sorted((tmp_path / "shards").glob("*.h5"))[0]
+    args = ["reconstruct", str(shard), "--method", "pseudo", "--sequencing", "partial", "--json"]
+    res = CliRunner().invoke(main, [*args, "--window", "40", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout.strip().splitlines()[-1])
+    assert summary["windows"] >= 3 and summary["mpjpe_mm"] < 50
+    res = CliRunner().invoke(main, [*args, "--window", "off"])
+    assert res.exit_code == 0 and "windows" not in json.loads(res.stdout.strip().splitlines()[-1])
+    res = CliRunner().invoke(main, [*args, "--window", "x"])
+    assert res.exit_code != 0 and "--window" in res.output and "Traceback" not in res.output
