@@ -1,7 +1,7 @@
 """Runtime study of GTT-Net vs DLOE over sequence lengths (paper Fig. 5a), single-threaded by default.
 
 Run:
-    python benchmarks/bench_runtime.py                       # 100..600 images, paper recipe, 3 repeats
+    python benchmarks/bench_runtime.py                       # 100..600 images, 5 sequences x 3 repeats
     python benchmarks/bench_runtime.py --lengths 100,300 --threads 2 --out runs/eval/runtime
 
 A thin wrapper over :func:`gttnet.evaluate.runtime.run_runtime` (the same study as
@@ -26,7 +26,10 @@ def main() -> None:
     ap.add_argument("--lengths", default="100,200,300,400,500,600", help="Comma-separated image counts.")
     ap.add_argument("--methods", default="dloe,gttnet")
     ap.add_argument("--recipe", default="recipes/gttdata/paper.yaml")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=3, help="Timed runs per sequence.")
+    ap.add_argument(
+        "--sequences", type=int, default=5, help="Test sequences per length (medians over all runs)."
+    )
     ap.add_argument("--model", default=None, help="Trained GTT-Net model (default: bundled).")
     ap.add_argument("--threads", type=int, default=1, help="torch threads.")
     ap.add_argument("--device", default="cpu", help="Device of GTT-Net (cpu or cuda); DLOE runs on the CPU.")
@@ -44,6 +47,7 @@ def main() -> None:
         methods=args.methods.split(","),
         generate=args.recipe,
         repeats=args.repeats,
+        sequences=args.sequences,
         model=args.model,
         device=args.device,
     )

@@ -127,7 +127,9 @@ class RuntimeSpec:
         methods: Methods to time (GTT-Net falls back to an untrained network when no model exists).
         generate: Generate recipe whose test motions are long enough (window set per length).
         split: Split to draw from.
-        repeats: Timed runs per length (the minimum is reported).
+        repeats: Timed runs per sequence and length.
+        sequences: Test sequences timed per length (samples ``0..sequences-1`` of ``split``); the study
+            reports the median over sequences and repeats, with min..max.
         sequencing: Sequencing condition of the timed runs.
         model: Trained GTT-Net model path; None = bundled, or untrained when none is installed.
         device: Device of the GTT-Net timing (``"cpu"`` or ``"cuda"``); the classical methods run on the CPU.
@@ -138,6 +140,7 @@ class RuntimeSpec:
     generate: str = "recipes/gttdata/paper.yaml"
     split: str = "test"
     repeats: int = 1
+    sequences: int = 1
     sequencing: str = "none"
     model: str | None = None
     device: str = "cpu"

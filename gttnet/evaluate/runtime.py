@@ -26,7 +26,8 @@ class RuntimeResult:
     Args:
         lengths: Requested images per sequence.
         n_images: Images actually built per length.
-        seconds: Method -> best-of-``repeats`` seconds per sequence, per length.
+        seconds: Method -> median seconds per sequence (over sequences and repeats), per length.
+        spread: Method -> ``(min, max)`` seconds per length, over the same runs.
         notes: How each method was timed (e.g. an untrained network when no model is installed).
         markdown: The speed-up table.
     """
@@ -35,6 +36,7 @@ class RuntimeResult:
     n_images: list[int]
     seconds: dict[str, list[float]]
     notes: dict[str, str] = field(default_factory=dict)
+    spread: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     markdown: str = ""
 
 
@@ -71,7 +73,7 @@ def gttnet_timer(model: str | None = None, device: str = "cpu"):
     return run, note
 
 
-def _sample_of_length(spec: RuntimeSpec, length: int, rate: float | None):
+def _samples_of_length(spec: RuntimeSpec, length: int, rate: float | None):
     from gttdata.generate_plan import build_sample
     from gttdata.recipe import load_recipe
 
@@ -79,35 +81,42 @@ def _sample_of_length(spec: RuntimeSpec, length: int, rate: float | None):
         probe = build_sample(load_recipe(spec.generate, ["capture.window_s=1.0"]), spec.split, 0)[0]
         rate = probe.n_images / 1.0
     window = length / rate
-    sample = build_sample(load_recipe(spec.generate, [f"capture.window_s={window:.6f}"]), spec.split, 0)[0]
-    return sample, rate
+    recipe = load_recipe(spec.generate, [f"capture.window_s={window:.6f}"])
+    return [build_sample(recipe, spec.split, i)[0] for i in range(max(spec.sequences, 1))], rate
 
 
 def _speedup_markdown(res: RuntimeResult) -> str:
     names = list(res.seconds)
-    head = "| images | " + " | ".join(f"{m} [s]" for m in names) + " |"
+    head = "| images | " + " | ".join(f"{m} [s], median (min..max)" for m in names) + " |"
     ratio = "dloe" in res.seconds and "gttnet" in res.seconds
     lines = [
         head + (" speed-up (DLOE / GTT-Net) |" if ratio else ""),
         "|---|" + "---|" * (len(names) + ratio),
     ]
     for i, n in enumerate(res.n_images):
-        cells = [f"{res.seconds[m][i]:.3f}" for m in names]
+        cells = []
+        for m in names:
+            lo, hi = res.spread[m][i] if m in res.spread else (res.seconds[m][i],) * 2
+            cells.append(f"{res.seconds[m][i]:.3f} ({lo:.3f}..{hi:.3f})")
         if ratio:
             cells.append(f"{res.seconds['dloe'][i] / res.seconds['gttnet'][i]:.1f}x")
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
     if ratio:
         mean = np.mean(np.array(res.seconds["dloe"]) / np.array(res.seconds["gttnet"]))
-        lines += ["", f"Mean speed-up: {mean:.1f}x (paper: ~30x against the open-source DLOE)."]
+        lines += [
+            "",
+            f"Mean speed-up (ratio of medians): {mean:.1f}x (paper: ~30x against the open-source DLOE).",
+        ]
     lines += ["", *[f"- {m}: {note}" for m, note in res.notes.items()]]
     return "\n".join(lines) + "\n"
 
 
 def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = False) -> RuntimeResult:
-    """Time each method on one sequence per length; write ``runtime.csv``, ``runtime.md``, ``runtime.png``.
+    """Time each method per length; write ``runtime.csv``, ``runtime.md``, ``runtime.png``.
 
-    Sequences come from the first sample of ``spec.split`` of ``spec.generate`` with ``capture.window_s``
-    set so that the capture holds about ``length`` images.
+    Sequences are the first ``spec.sequences`` samples of ``spec.split`` of ``spec.generate`` with
+    ``capture.window_s`` set so that each capture holds about ``length`` images; every sequence is timed
+    ``spec.repeats`` times and the median over all those runs is reported, with their min..max.
 
     Args:
         spec: :class:`~gttnet.evaluate.recipe.RuntimeSpec`.
@@ -132,22 +141,27 @@ def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = Fals
             runners[m] = lambda obs, m=m: reconstruct(obs, m).points3d
             notes[m] = f"gttnet.baselines.reconstruct(obs, {m!r})"
     notes["threads"] = f"torch threads {torch.get_num_threads()}, sequencing {spec.sequencing}"
+    notes["runs"] = f"{max(spec.sequences, 1)} sequences x {spec.repeats} repeats per length"
     res = RuntimeResult(list(spec.lengths), [], {m: [] for m in spec.methods}, notes)
+    res.spread = {m: [] for m in spec.methods}
     rate = None
     for length in spec.lengths:
-        sample, rate = _sample_of_length(spec, length, rate)
-        obs, _ = make_view(sample, spec.sequencing)
-        res.n_images.append(obs.n_images)
+        samples, rate = _samples_of_length(spec, length, rate)
+        views = [make_view(sample, spec.sequencing)[0] for sample in samples]
+        res.n_images.append(int(np.median([obs.n_images for obs in views])))
         for m, fn in runners.items():
             if length == spec.lengths[0]:
-                fn(obs)  # warm-up: imports, caches, first-call allocation
-            best = np.inf
-            for _ in range(spec.repeats):
-                t0 = time.perf_counter()
-                fn(obs)
-                best = min(best, time.perf_counter() - t0)
-            res.seconds[m].append(float(best))
-            (log.info if progress else log.debug)("runtime %s N=%d: %.3f s", m, obs.n_images, best)
+                fn(views[0])  # warm-up: imports, caches, first-call allocation
+            runs = []
+            for obs in views:
+                for _ in range(spec.repeats):
+                    t0 = time.perf_counter()
+                    fn(obs)
+                    runs.append(time.perf_counter() - t0)
+            med = float(np.median(runs))
+            res.seconds[m].append(med)
+            res.spread[m].append((float(min(runs)), float(max(runs))))
+            (log.info if progress else log.debug)("runtime %s N=%d: median %.3f s", m, res.n_images[-1], med)
     res.markdown = _speedup_markdown(res)
     with (out / "runtime.csv").open("w", newline="") as f:
         w = csv.writer(f)

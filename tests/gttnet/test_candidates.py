@@ -60,7 +60,7 @@ def test_candidates_come_from_other_cameras_and_find_the_dense_neighbours(scene_
     assert cand.shape == (obs.n_images, 18)
     assert np.all(obs.cam_id[cand] != obs.cam_id[:, None])
     pt = pseudo_triangulate(C, r, obs.visible, obs.cam_id)
-    cp = candidate_pseudo_triangulate(C, r, obs.visible, obs.cam_id, per_camera=6)
+    cp = candidate_pseudo_triangulate(C, r, obs.visible, obs.cam_id, per_camera=6, dtype=np.float64)
     k = 8
     dense = neighbourhoods(pt.cost, sequencing="none", cam_id=obs.cam_id, k=k, order=pt.order)
     sparse = cp.neighbours(k)
@@ -84,7 +84,9 @@ def test_all_candidates_equals_dense(scene_factory):
     obs, _ = make_view(sample, "none")
     C, r = obs.centers(), obs.rays()
     pt = pseudo_triangulate(C, r, obs.visible, obs.cam_id)
-    cp = candidate_pseudo_triangulate(C, r, obs.visible, obs.cam_id, per_camera=8, pose_per_camera=0)
+    cp = candidate_pseudo_triangulate(
+        C, r, obs.visible, obs.cam_id, per_camera=8, pose_per_camera=0, dtype=np.float64
+    )
     np.testing.assert_allclose(cp.X_init, pt.X_init, atol=1e-9)
 
 

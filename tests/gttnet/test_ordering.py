@@ -69,3 +69,22 @@ def test_isolated_images_and_empty():
 def test_bad_affinity(A, match):
     with pytest.raises(ValueError, match=match):
         spectral_order(A)
+
+
+def test_sparse_fiedler_matches_dense_on_a_large_chain(monkeypatch):
+    """Above 400 nodes a sparse affinity takes shift-invert Lanczos; the order equals the dense one."""
+    import gttnet.geometry.ordering as ordering
+
+    g = np.random.default_rng(3)
+    n = 600
+    perm = g.permutation(n)
+    A = np.zeros((n, n))
+    A[perm[:-1], perm[1:]] = g.uniform(0.5, 1.0, n - 1)
+    A[perm[:-2], perm[2:]] = g.uniform(0.0, 0.3, n - 2)
+    sparse = ordering.spectral_order(A)
+    monkeypatch.setattr(ordering, "_SPARSE_MIN_NODES", 10**9)
+    dense = ordering.spectral_order(A)
+    np.testing.assert_array_equal(sparse, dense)
+    truth = np.empty(n, dtype=np.int64)
+    truth[perm] = np.arange(n)
+    assert sparse.tolist() == truth.tolist() or sparse.tolist() == (n - 1 - truth).tolist()

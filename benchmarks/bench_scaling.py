@@ -1,0 +1,143 @@
+"""Benchmark of reconstruction cost against recording length: seconds and peak memory, 300 to 72,000 images.
+
+Run:  python benchmarks/bench_scaling.py [--sizes 300 1440 7200 24000 72000] [--runs 3] [--data DIR]
+
+Data: ``recipes/gttdata/long.yaml`` (4 cameras at 30 Hz, one dancer inside the ring) with the capture
+window set to ``size / 120`` seconds, generated once per size into ``--data`` (default
+``/tmp/gtt-bench-scaling``, reused when present). Each configuration runs ``gttnet reconstruct`` end to
+end in a fresh process (start-up, loading, reconstruction, report; ``--sequencing partial``):
+
+* ``gttnet windowed``: GTT-Net window by window (``--window auto``: one piece up to 2,000 images);
+* ``gttnet whole``: GTT-Net in one piece (``--window off``), up to ``--max-whole`` images;
+* ``pseudo windowed``: pseudo-triangulation window by window.
+
+Wall and CPU seconds and peak RSS come from ``os.wait4`` on the child. The table gives medians over
+``--runs`` runs (min..max), microseconds of wall time per image, that per-image cost as a ratio to the
+smallest size's (1.0 = linear), and the whole / windowed wall-time ratio where both ran. On a machine
+shared with other jobs wall time includes waiting for a core; CPU seconds do not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+RECIPE = REPO / "recipes" / "gttdata" / "long.yaml"
+CONFIGS = {
+    "gttnet windowed": ["--method", "gttnet", "--window", "auto"],
+    "gttnet whole": ["--method", "gttnet", "--window", "off"],
+    "pseudo windowed": ["--method", "pseudo", "--window", "auto"],
+}
+
+
+def _env() -> dict:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(var, "1")
+    return env
+
+
+def make_shard(size: int, root: Path) -> Path:
+    """Generate (once) the long recipe cut to ``size`` images; returns the shard path."""
+    out = root / f"long_{size}"
+    shard = out / "test" / "shard-00000.h5"
+    if shard.is_file() and (out / "manifest.json").is_file():
+        return shard
+    window = size / 120.0
+    cmd = [
+        sys.executable,
+        "-m",
+        "gttdata",
+        "generate",
+        str(RECIPE),
+        f"capture.window_s={window}",
+        f"splits.0.sources.0.duration_s={window + 1.0}",
+        f"name=long_{size}",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
+    subprocess.run(cmd, check=True, env=_env(), stdout=subprocess.DEVNULL)
+    return shard
+
+
+def run_child(cmd: list[str]) -> tuple[float, float, float, dict]:
+    """Wall s, CPU s and peak RSS (MB) of one child process, and its JSON summary."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=_env())
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed with status {proc.returncode}")
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0, summary
+
+
+def fmt(xs: list[float], spec: str) -> str:
+    return f"{statistics.median(xs):{spec}} ({min(xs):{spec}}..{max(xs):{spec}})"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[300, 1440, 7200, 24000, 72000])
+    p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--max-whole", type=int, default=3600, help="Largest size run in one piece.")
+    p.add_argument("--configs", default=",".join(CONFIGS))
+    p.add_argument("--data", type=Path, default=Path("/tmp/gtt-bench-scaling"))
+    args = p.parse_args()
+    rows = []
+    for size in args.sizes:
+        shard = make_shard(size, args.data)
+        for name in args.configs.split(","):
+            if name == "gttnet whole" and size > args.max_whole:
+                continue
+            cmd = [
+                sys.executable,
+                "-m",
+                "gttnet",
+                "reconstruct",
+                str(shard),
+                "--sequencing",
+                "partial",
+                *CONFIGS[name],
+                "--json",
+                "--no-progress",
+            ]
+            walls, cpus, rss, errs = [], [], [], []
+            for _ in range(args.runs):
+                wall, cpu, mb, summary = run_child(cmd)
+                walls.append(wall)
+                cpus.append(cpu)
+                rss.append(mb)
+                errs.append(summary.get("mpjpe_mm", float("nan")))
+            rows.append((size, name, walls, cpus, rss, errs, summary.get("windows", 1)))
+            print(f"{size} {name}: {statistics.median(walls):.1f} s", flush=True)
+    base = {}
+    for size, name, walls, *_ in rows:
+        base.setdefault(name, statistics.median(walls) / size)
+    whole = {size: statistics.median(w) for size, name, w, *_ in rows if name == "gttnet whole"}
+    print(f"\n`gttnet reconstruct --sequencing partial` end to end, {args.runs} runs each; median (min..max)")
+    print(
+        "| images | config | windows | wall s | CPU s | peak RSS MB | us/image | per-image vs smallest | whole / windowed | MPJPE mm |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for size, name, walls, cpus, rss, errs, windows in rows:
+        med = statistics.median(walls)
+        ratio = f"{whole[size] / med:.1f}x" if name == "gttnet windowed" and size in whole else "-"
+        print(
+            f"| {size:,} | {name} | {windows} | {fmt(walls, '.2f')} | {fmt(cpus, '.2f')} | {fmt(rss, '.0f')} | "
+            f"{1e6 * med / size:.0f} | {med / size / base[name]:.2f} | {ratio} | {statistics.median(errs):.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
