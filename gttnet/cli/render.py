@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 
 import click
-import numpy as np
 
 from gttdata.cli import friendly_errors
 
@@ -102,6 +101,8 @@ def render_cmd(
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     import csv
+
+    import numpy as np
 
     with open(written["reprojection_error"]) as fh:
         rows = [r for r in csv.DictReader(fh) if r["mean_px"]]
