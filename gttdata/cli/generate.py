@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 import click
 
 from gttdata.cli import friendly_errors
+from gttdata.cli.inspect import format_summary  # light: both import only click at module level
+from gttdata.cli.verify import repo_manifests_dir
 
 if TYPE_CHECKING:
     from gttdata.manifest import Manifest
@@ -80,8 +82,6 @@ def generate_cmd(
 
     Example: gttdata generate recipes/gttdata/tiny.yaml seed=3 --workers 2 --out /tmp/tiny
     """
-    from gttdata.cli.inspect import format_summary
-    from gttdata.cli.verify import repo_manifests_dir
     from gttdata.generation import generate_dataset, parse_shard_range, plan_blocks
     from gttdata.manifest import register_manifest
     from gttdata.recipe import load_recipe

@@ -7,12 +7,15 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-import numpy as np
 
 from gttdata.cli import friendly_errors
 from gttnet.errors import GttNetError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["parse_fps", "read_frame_times", "register", "sync_cmd"]
 
@@ -56,6 +59,8 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
     Raises:
         GttNetError: Missing column, unparsable value, or an image without a row (one line naming the file).
     """
+    import numpy as np
+
     path = Path(path)
     table: dict[tuple[int, int], float] = {}
     with path.open(newline="") as f:
@@ -148,6 +153,8 @@ def sync_cmd(
       gttnet sync data/gttdata/default/test/shard-00000.h5 --sample 0 --out runs/clocks.json --json
       gttnet sync capture.json --fps 25,30,60 --frame-times pts.csv --out clocks.json
     """
+    import numpy as np
+
     from gttnet.io import load_input
     from gttnet.sync import clock_times, recover_clocks
 
