@@ -151,6 +151,20 @@ def _view_permutation(sample: CaptureSample, sequencing: str, seed: int | None) 
     return np.random.default_rng(s).permutation(n)
 
 
+def _stream_times(sample: CaptureSample, perm: np.ndarray) -> np.ndarray | None:
+    """What each camera's own clock says of its images: ``frame / fps`` at the camera's nominal rate, with
+    the camera's frame counter (gaps where frames were dropped), from the capture parameters in ``meta``;
+    None when ``meta`` does not record the rates. Offsets, drift and jitter are not in it (they are what
+    clock recovery estimates)."""
+    fps = sample.meta.get("capture", {}).get("fps_hz") if isinstance(sample.meta, dict) else None
+    if not fps or len(fps) <= int(sample.cam_id.max(initial=0)):
+        return None
+    frame = np.asarray(sample.meta.get("frame_number", sample.stream_index), dtype=np.float64)
+    if frame.shape != sample.cam_id.shape:
+        return None
+    return (frame / np.asarray(fps, dtype=np.float64)[sample.cam_id])[perm]
+
+
 def make_view(
     sample: CaptureSample, sequencing: str, *, seed: int | None = None
 ) -> tuple[Observations, GroundTruth]:
@@ -183,6 +197,7 @@ def make_view(
         image_size=np.asarray(sample.image_size).copy(),
         stream_index=None if sequencing == "none" else sample.stream_index[perm].copy(),
         timestamp_s=sample.timestamp_s[perm].copy() if sequencing == "full" else None,
+        stream_time_s=None if sequencing == "none" else _stream_times(sample, perm),
     )
     gt = GroundTruth(
         points3d=sample.points3d[perm].copy(),

@@ -16,6 +16,17 @@ __all__ = ["register", "reconstruct_cmd"]
 log = logging.getLogger(__name__)
 
 
+def _method_fields(rec) -> dict:
+    """``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto") and,
+    after clock recovery, ``clock_offsets_s`` ({camera: s})."""
+    out = {"method": rec.info.get("method_ran", rec.method)}
+    if out["method"] != rec.method:
+        out["requested_method"] = rec.method
+    if "clock_offsets_s" in rec.info:
+        out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
+    return out
+
+
 def _report(loaded, rec) -> dict:
     import numpy as np
 
@@ -30,6 +41,7 @@ def _report(loaded, rec) -> dict:
     }
     if "windows" in rec.info:
         out["windows"] = rec.info["windows"]
+    out.update(_method_fields(rec))
     gt = loaded.ground_truth
     if gt is not None:
         out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt.points3d), 4)
@@ -475,6 +487,7 @@ def _report_recording(view, rec, gt_points) -> dict:
     }
     if "windows" in rec.info:
         out["windows"] = rec.info["windows"]
+    out.update(_method_fields(rec))
     if gt_points is not None:
         out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt_points), 4)
     return out

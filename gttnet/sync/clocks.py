@@ -67,14 +67,16 @@ def local_times(
     """Each image's time on its own camera's clock, seconds, shape ``(N,)``.
 
     ``frame_times_s[n]`` when given (e.g. the presentation timestamps ffprobe reports, which show dropped
-    frames as gaps), else ``stream_index[n] / rate[cam_id[n]]`` (a stream index that skips is a dropped
-    frame).
+    frames as gaps), else the observations' own ``stream_time_s`` when they carry it, else
+    ``stream_index[n] / rate[cam_id[n]]`` (a stream index that skips is a dropped frame).
 
     Raises:
         SequencingError: Neither ``stream_index`` nor ``frame_times_s`` is available.
         GttNetError: ``frame_times_s`` has the wrong shape, is not finite, or disagrees with the stream order.
     """
     cam = np.asarray(obs.cam_id)
+    if frame_times_s is None:
+        frame_times_s = getattr(obs, "stream_time_s", None)
     if frame_times_s is not None:
         tau = np.asarray(frame_times_s, dtype=np.float64)
         if tau.shape != cam.shape:
@@ -277,6 +279,10 @@ def apply_clocks(
         for c in np.unique(obs.cam_id):
             sel = np.flatnonzero(obs.cam_id == c)
             si[sel[np.argsort(t[sel], kind="stable")]] = np.arange(sel.size)
+    extra = {}
+    for name in ("stream_time_s", "confidence"):  # per-image fields of newer Observations, carried along
+        if getattr(obs, name, None) is not None:
+            extra[name] = np.asarray(getattr(obs, name))[seq]
     return Observations(
         sequencing="full",
         skeleton=obs.skeleton,
@@ -288,4 +294,5 @@ def apply_clocks(
         image_size=obs.image_size,
         stream_index=np.asarray(si)[seq],
         timestamp_s=t[seq],
+        **extra,
     )

@@ -341,7 +341,8 @@ def recover_clocks(
             ignored), or any sequencing with ``frame_times_s``. Cameras are calibrated (``K``,
             ``cam_from_world``); ``cam_id`` values need not be contiguous and their order does not matter.
         fps: Nominal frame rate per camera (see :func:`gttnet.sync.clocks.per_camera_rates`); local frame
-            times are ``stream_index / fps`` unless ``frame_times_s`` is given.
+            times are ``stream_index / fps`` unless ``frame_times_s`` is given or the observations carry
+            ``stream_time_s`` (then, without ``fps``, each rate is the inverse median frame interval).
         frame_times_s: Per-image time on its camera's own clock, seconds, shape ``(N,)``
             (e.g. presentation timestamps; gaps are dropped frames).
         max_offset_s: Largest relative offset searched between two cameras, seconds (None: any offset
@@ -363,6 +364,12 @@ def recover_clocks(
     """
     rates = per_camera_rates(obs.cam_id, fps)
     tau = local_times(obs, rates, frame_times_s)
+    if fps is None and (frame_times_s is not None or getattr(obs, "stream_time_s", None) is not None):
+        # The cameras' own times are known: their nominal rates are the typical frame intervals.
+        for c in rates:
+            ts = np.sort(tau[obs.cam_id == c])
+            if ts.size > 1 and np.median(np.diff(ts)) > 0:
+                rates[c] = float(1.0 / np.median(np.diff(ts)))
     streams = _streams(obs, tau, rates, kernel_frames)
     v = len(streams)
     if v < 2:

@@ -77,3 +77,19 @@ def test_sync_frame_times_csv(tmp_path, shard):
 def test_sync_bad_fps_is_a_usage_error(tmp_path, shard):
     r = CliRunner().invoke(main, ["sync", str(shard), "--fps", "fast", "--out", str(tmp_path / "c.json")])
     assert r.exit_code == 2 and "--fps" in r.output
+
+
+def test_reconstruct_auto_runs_sync_on_partial_input(tmp_path):
+    writer = pytest.importorskip("gttdata.shards.writer")
+    from tests.gttnet.test_sync import _capture
+
+    with writer.ShardWriter(tmp_path / "s", split="test") as w:
+        w.write(_capture((0.0, 1.3, 0.4), (30.0, 30.0, 30.0), end_s=2.5))
+    shard = sorted((tmp_path / "s").glob("*.h5"))[0]
+    r = CliRunner().invoke(main, ["reconstruct", str(shard), "--sequencing", "partial", "--json"])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output.strip().splitlines()[-1])
+    assert rep["method"] == "sync" and rep["requested_method"] == "auto"
+    offs = rep["clock_offsets_s"]
+    np.testing.assert_allclose([offs["0"], offs["1"], offs["2"]], [0.0, 1.3, 0.4], atol=0.1 / 30)
+    assert rep["order_kendall_tau"] > 0.99
