@@ -56,7 +56,7 @@ def main() -> None:
 
 def _register() -> None:
     """Attach subcommands; each module adds itself to ``main``. Missing modules are skipped."""
-    for mod in ("reconstruct", "sync", "train", "evaluate", "segment", "render"):
+    for mod in ("reconstruct", "sync", "train", "evaluate", "segment", "render", "export_json"):
         try:
             module = __import__(f"gttnet.cli.{mod}", fromlist=["register"])
         except ModuleNotFoundError as exc:

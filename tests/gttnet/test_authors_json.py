@@ -123,3 +123,29 @@ def test_cli_reconstructs_a_17_joint_authors_file(tmp_path, coco_sample):
     assert res.exit_code == 0, res.output
     out = json.loads(res.output.strip().splitlines()[-1])
     assert out["n_joints"] == 17 and out["sequencing"] == "none"
+
+
+def test_cli_export_json_then_reconstruct(tmp_path):
+    from gttnet.cli import main
+
+    out = tmp_path / "authors_layout.json"
+    args = [
+        "export-json",
+        "recipes/gttdata/tiny_topologies.yaml",
+        "--split",
+        "test",
+        "--out",
+        str(out),
+        "--json",
+    ]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.output.strip().splitlines()[-1])
+    assert info["n_joints"] == json.loads(out.read_text())["ray"].__len__() // 3
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code != 0 and "--overwrite" in again.output and "Traceback" not in again.output
+    res = CliRunner().invoke(
+        main, ["reconstruct", str(out), "--method", "pseudo", "--sequencing", "none", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output.strip().splitlines()[-1])["n_joints"] == info["n_joints"]

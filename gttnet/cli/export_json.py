@@ -1,0 +1,69 @@
+"""The ``gttnet export-json`` command: write one of our captures in the authors' GTT-Net JSON layout."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from gttdata.cli import friendly_errors
+
+__all__ = ["export_json_cmd", "register"]
+
+
+@click.command("export-json")
+@click.argument("input_path", metavar="INPUT", type=click.Path())
+@click.option(
+    "-s", "--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index."
+)
+@click.option("--split", default="test", show_default=True, help="Split of a recipe or dataset INPUT.")
+@click.option("--variant", default="orig", show_default=True, help="Stored variant of the sample.")
+@click.option(
+    "--units",
+    type=click.Choice(["m", "mm", "cm", "inch"]),
+    default="inch",
+    show_default=True,
+    help="Length unit of C, point3D and X_init in the file (the authors' files use inches).",
+)
+@click.option(
+    "--out", "out_path", type=click.Path(dir_okay=False), required=True, help="The .json file to write."
+)
+@click.option("--overwrite", is_flag=True, help="Replace an existing --out file.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object describing the file written.")
+@friendly_errors
+def export_json_cmd(input_path, sample, split, variant, units, out_path, overwrite, as_json):
+    """Write sample I of INPUT (a shard file, a dataset folder or a generate recipe) in the authors' GTT-Net
+    JSON layout: K = 0 with world rays, camID, t, C, point3D, limbSeq, X_init and rayDInd (docs/FORMAT.md).
+    `gttnet reconstruct OUT.json` reads it back.
+
+    \b
+    Examples:
+      gttnet export-json recipes/gttdata/tiny_topologies.yaml --split test --out /tmp/authors_layout.json --overwrite
+      gttnet reconstruct /tmp/authors_layout.json --method dloe --sequencing none --json
+    """
+    from gttnet.cli.segment import load_capture
+    from gttnet.io.gttnet_json import write_gttnet_json
+
+    capture = load_capture(input_path, sample=sample, split=split, variant=variant)
+    try:
+        path = write_gttnet_json(capture, out_path, units=units, overwrite=overwrite)
+    except FileExistsError as exc:
+        raise click.ClickException(str(exc)) from None
+    summary = {
+        "out": str(path),
+        "n_images": capture.n_images,
+        "n_joints": capture.n_joints,
+        "skeleton": capture.skeleton.name,
+        "units": units,
+    }
+    if as_json:
+        click.echo(json.dumps(summary))
+    else:
+        click.echo(
+            f"{path}: {capture.n_images} images, {capture.n_joints} joints ({capture.skeleton.name}), {units}"
+        )
+
+
+def register(main: click.Group) -> None:
+    """Attach ``export-json`` to the ``gttnet`` command group."""
+    main.add_command(export_json_cmd)
