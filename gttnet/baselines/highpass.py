@@ -109,6 +109,7 @@ def fit_highpass(
     lam: float,
     order: int = 2,
     timestamp_s: np.ndarray | None = None,
+    weight: np.ndarray | None = None,
 ) -> np.ndarray:
     """Trajectories minimising ray residuals plus ``lam * ||G X_p||^2`` along an already ordered sequence.
 
@@ -120,12 +121,14 @@ def fit_highpass(
         order: Difference order of the filter ``G``.
         timestamp_s: The images' times, sorted, seconds, shape ``(N,)``: divided differences of the
             irregular samples (see :func:`difference_operator`); None: evenly spaced.
+        weight: Per-observation weight of each ray residual (detector confidence), shape ``(N, J)``, or
+            None (all 1).
 
     Returns:
         Joints in world, metres, shape ``(N, J, 3)``, in the same (time) order.
     """
     n, J = visible.shape
-    P = ray_projectors(rays, visible)
+    P = ray_projectors(rays, visible, weight)
     ab = _banded_systems(P, lam, order, timestamp_s)
     rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
     X = np.empty((n, J, 3))
@@ -143,6 +146,7 @@ def _cross_validate(
     order: int,
     timestamp_s: np.ndarray | None = None,
     search: str = "grid",
+    weight: np.ndarray | None = None,
 ) -> tuple[float, dict[float, float]]:
     """Prior weight minimising the mean held-out ray distance; held-out images keep only the prior.
 
@@ -162,7 +166,9 @@ def _cross_validate(
     def score(lam: float) -> None:
         total = 0.0
         for held, train_vis in zip(folds, train, strict=True):
-            X = fit_highpass(centers, rays, train_vis, lam=lam, order=order, timestamp_s=timestamp_s)
+            X = fit_highpass(
+                centers, rays, train_vis, lam=lam, order=order, timestamp_s=timestamp_s, weight=weight
+            )
             total += float(np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held])))
         cv[lam] = total / count
 
@@ -205,7 +211,8 @@ def reconstruct_hpf(
     sample evenly); ``spacing="time"`` uses divided differences of the timestamps (unequal rates, cameras
     started at arbitrary times, recovered clocks).
     Each joint is one sparse banded linear system in its ``3N`` coordinates; missing joints are filled
-    by the prior alone.
+    by the prior alone. With detector confidences (``obs.confidence``) each ray residual is weighted
+    by its joint's confidence.
 
     The weight ``lam`` (dimensionless) is chosen, unless given, by ``n_folds``-fold cross-validation
     over images on the grid :data:`LAMBDAS`: the held-out images' rays are dropped, the fit
@@ -228,15 +235,16 @@ def reconstruct_hpf(
     seq = np.argsort(np.asarray(obs.timestamp_s), kind="stable")
     ts = np.asarray(obs.timestamp_s, dtype=np.float64)[seq] if spacing == "time" else None
     centers, rays, vis = obs.centers()[seq], obs.rays()[seq], obs.visible[seq]
+    weight = None if obs.confidence is None else obs.weights()[seq]
     cv: dict[float, float] = {}
     if lam is None:
         lam, cv = _cross_validate(
-            centers, rays, vis, n_folds=n_folds, order=order, timestamp_s=ts, search=search
+            centers, rays, vis, n_folds=n_folds, order=order, timestamp_s=ts, search=search, weight=weight
         )
     if not lam > 0:
         raise ValueError(f"hpf: lam must be > 0, got {lam}")
     X = np.empty((obs.n_images, obs.n_joints, 3))
-    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts)
+    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts, weight=weight)
     log.debug("hpf: lam=%g", lam)
     return Reconstruction(
         points3d=X,

@@ -281,7 +281,7 @@ def _resolve_input(
     "--weights/--no-weights",
     default=True,
     show_default=True,
-    help="Weigh each detection's ray residual by its confidence (recordings; DLOE pins rays; the DCT solver uses it).",
+    help="Weigh each detection's ray residual by its confidence (recordings; DLOE pins rays; HPF and DCT use it).",
 )
 @click.option(
     "--format",
