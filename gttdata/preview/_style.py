@@ -11,8 +11,13 @@ __all__ = [
     "LEFT",
     "RIGHT",
     "SIDE_RGB",
+    "SUBJECT_RGB",
+    "bone_rgb",
     "bone_sides",
+    "joint_rgb",
     "joint_sides",
+    "joint_subjects",
+    "rgb_bgr_u8",
     "side_bgr_u8",
 ]
 
@@ -24,6 +29,63 @@ SIDE_RGB: tuple[tuple[float, float, float], ...] = (
     (0.15, 0.55, 1.00),
     (1.00, 0.35, 0.15),
 )
+
+
+#: Colours of subject s in multi-subject captures, one hue per subject, as (midline, left, right) float RGB:
+#: left is the lighter and right the darker shade of the subject's hue.
+SUBJECT_RGB: tuple[tuple[tuple[float, float, float], ...], ...] = (
+    ((0.55, 0.70, 0.95), (0.55, 0.80, 1.00), (0.10, 0.40, 0.95)),  # blue
+    ((1.00, 0.70, 0.40), (1.00, 0.80, 0.45), (0.90, 0.40, 0.05)),  # orange
+    ((0.55, 0.90, 0.55), (0.65, 1.00, 0.60), (0.15, 0.65, 0.20)),  # green
+    ((0.85, 0.60, 0.95), (0.92, 0.75, 1.00), (0.60, 0.25, 0.85)),  # purple
+)
+
+
+def joint_subjects(skeleton: Skeleton) -> np.ndarray:
+    """Subject of each joint of a stacked multi-subject skeleton, shape ``(J,)`` int64.
+
+    ``merge_subjects`` names subject s's joints with the prefix ``"a_"``, ``"b_"``, ...; a skeleton whose
+    names do not all carry such a prefix, or carry only one, is a single subject (all zeros).
+    """
+    names = skeleton.joint_names
+    if not names or not all(len(n) > 2 and n[1] == "_" and "a" <= n[0] <= "z" for n in names):
+        return np.zeros(len(names), dtype=np.int64)
+    letters = np.array([ord(n[0]) - ord("a") for n in names], dtype=np.int64)
+    return letters if len(np.unique(letters)) > 1 else np.zeros(len(names), dtype=np.int64)
+
+
+def joint_rgb(skeleton: Skeleton) -> np.ndarray:
+    """Float RGB colour of each joint, shape ``(J, 3)``.
+
+    One subject: by body side (:data:`SIDE_RGB`). Several stacked subjects: one hue per subject
+    (:data:`SUBJECT_RGB`), lighter on the left and darker on the right.
+    """
+    sides = joint_sides(skeleton)
+    subjects = joint_subjects(skeleton)
+    if not subjects.any():
+        return np.array(SIDE_RGB, dtype=np.float64)[sides]
+    pal = np.array(SUBJECT_RGB, dtype=np.float64)
+    return pal[subjects % len(pal), sides]
+
+
+def bone_rgb(skeleton: Skeleton) -> np.ndarray:
+    """Float RGB colour of each drawn limb of ``skeleton.limbs``, shape ``(L, 3)``: the colour of its side
+    (:func:`bone_sides`) in its subject's palette, as :func:`joint_rgb`."""
+    limbs = skeleton.limbs
+    if not len(limbs):
+        return np.zeros((0, 3))
+    sides = bone_sides(skeleton)
+    subjects = joint_subjects(skeleton)
+    if not subjects.any():
+        return np.array(SIDE_RGB, dtype=np.float64)[sides]
+    pal = np.array(SUBJECT_RGB, dtype=np.float64)
+    return pal[subjects[limbs[:, 0]] % len(pal), sides]
+
+
+def rgb_bgr_u8(rgb) -> tuple[int, int, int]:
+    """OpenCV BGR colour (0-255 ints) of a float RGB colour."""
+    r, g, b = (float(c) for c in rgb)
+    return int(round(b * 255)), int(round(g * 255)), int(round(r * 255))
 
 
 def _side_of_pair(a: str, b: str) -> int:
@@ -77,5 +139,4 @@ def bone_sides(skeleton: Skeleton) -> np.ndarray:
 
 def side_bgr_u8(side: int) -> tuple[int, int, int]:
     """OpenCV BGR colour (0-255 ints) of a side."""
-    r, g, b = SIDE_RGB[int(side)]
-    return int(round(b * 255)), int(round(g * 255)), int(round(r * 255))
+    return rgb_bgr_u8(SIDE_RGB[int(side)])

@@ -8,13 +8,26 @@ import cv2
 import numpy as np
 
 from gttdata.capture.sample import CaptureSample
-from gttdata.preview._style import CENTRE, LEFT, RIGHT, bone_sides, joint_sides, side_bgr_u8
+from gttdata.preview._style import (
+    CENTRE,
+    LEFT,
+    RIGHT,
+    SUBJECT_RGB,
+    bone_rgb,
+    joint_rgb,
+    joint_subjects,
+    rgb_bgr_u8,
+    side_bgr_u8,
+)
 
 __all__ = [
     "BACKGROUND_BGR",
     "MISSING_BGR",
+    "MAX_SHEET_WIDTH_PX",
     "contact_sheet",
+    "contact_sheets",
     "crop_windows",
+    "motion_label",
     "draw_overlay",
     "sheet_columns",
     "write_video",
@@ -27,6 +40,8 @@ _IMAGE_BGR = (40, 38, 36)
 MISSING_BGR = (255, 0, 255)
 _GT_BGR = (255, 255, 255)
 _ERROR_BGR = (150, 150, 150)
+#: Widest contact sheet page, pixels: 16 columns of the default 120 px tiles; more images go on more pages.
+MAX_SHEET_WIDTH_PX = 2048
 _SHIFT = 4  # OpenCV fixed-point drawing: coordinates carry 4 fractional bits, so markers sit sub-pixel exact.
 _ONE = 1 << _SHIFT
 
@@ -92,8 +107,9 @@ def draw_overlay(
 ) -> np.ndarray:
     """Draw image ``n``'s 2-D data on a blank canvas.
 
-    Bones join the ground-truth projections (darker side colour); each observed joint is a filled disc
-    in its side colour (left blue, right orange-red, midline grey) with a white ring at its ground-truth
+    Bones join the ground-truth projections (darker shade of the joint colour); each observed joint is a
+    filled disc in its colour (one subject: left blue, right orange-red, midline grey; several subjects:
+    one hue per subject, lighter left and darker right, see ``_style.joint_rgb``) with a white ring at its ground-truth
     projection and a grey line to it when the detection error is visible (outputs at least 240 px wide);
     a missing joint is a magenta cross at its ground-truth projection. The camera image is the lighter
     rectangle.
@@ -136,17 +152,17 @@ def draw_overlay(
     obs = (sample.keypoints_px[n].astype(np.float64) - (x0, y0)) * s
     vis = sample.visible[n] & np.isfinite(obs).all(axis=1)
     ok_gt = np.isfinite(gt).all(axis=1)
-    sides = joint_sides(sample.skeleton)
-    for (a, b), side in zip(sample.skeleton.limbs, bone_sides(sample.skeleton), strict=True):
+    colours = [rgb_bgr_u8(c) for c in joint_rgb(sample.skeleton)]
+    for (a, b), rgb in zip(sample.skeleton.limbs, bone_rgb(sample.skeleton), strict=True):
         if ok_gt[a] and ok_gt[b]:
-            colour = tuple(int(c * 0.6) for c in side_bgr_u8(side))
+            colour = tuple(int(c * 0.6) for c in rgb_bgr_u8(rgb))
             cv2.line(img, _fx(*gt[a]), _fx(*gt[b]), colour, thick, cv2.LINE_AA, _SHIFT)
     for j in np.flatnonzero(vis & ok_gt & rings):
         if np.linalg.norm(obs[j] - gt[j]) > r:
             cv2.line(img, _fx(*gt[j]), _fx(*obs[j]), _ERROR_BGR, 1, cv2.LINE_AA, _SHIFT)
         cv2.circle(img, _fx(*gt[j]), int(round((r + 2) * _ONE)), _GT_BGR, 1, cv2.LINE_AA, _SHIFT)
     for j in np.flatnonzero(vis):
-        cv2.circle(img, _fx(*obs[j]), int(round(r * _ONE)), side_bgr_u8(sides[j]), -1, cv2.LINE_8, _SHIFT)
+        cv2.circle(img, _fx(*obs[j]), int(round(r * _ONE)), colours[j], -1, cv2.LINE_8, _SHIFT)
     c = r + 1
     for j in np.flatnonzero(~vis & ok_gt):
         u, vv = gt[j]
@@ -174,51 +190,95 @@ def sheet_columns(sample: CaptureSample, max_images: int | None = None) -> np.nd
     return order if max_images is None else order[:max_images]
 
 
+def motion_label(sample: CaptureSample) -> str:
+    """The sample's motion(s) for a title: one name, or ``a: <name>, b: <name>`` per subject/event."""
+    records = sample.meta.get("motions") or []
+    if len(records) > 1:
+        subjects = [r.get("subject") for r in records]
+        if sample.meta.get("n_subjects", 1) > 1 and all(isinstance(x, int) for x in subjects):
+            return ", ".join(
+                f"{chr(ord('a') + x)}: {r.get('name', '?')}" for x, r in zip(subjects, records, strict=True)
+            )
+        return ", ".join(f"event {k + 1}: {r.get('name', '?')}" for k, r in enumerate(records))
+    names = [n for n in str(sample.motion_name).split("|") if n]
+    return ", ".join(names)
+
+
+def _sheet_per_page(tile_w: int, max_width_px: int | None) -> int | None:
+    return None if max_width_px is None else max(1, (int(max_width_px) - 64) // int(tile_w))
+
+
 def contact_sheet(
     sample: CaptureSample,
     *,
     tile_px: tuple[int, int] = (120, 160),
     max_images: int | None = 48,
     crop: bool = True,
+    page: int = 0,
+    max_width_px: int | None = MAX_SHEET_WIDTH_PX,
 ) -> np.ndarray:
     """Cameras-by-time grid of 2-D overlays: row v holds camera v's images, column k the k-th image in time.
 
     Each column holds exactly one image, so the interleaving of the unsynchronized cameras shows as a
-    staircase; each column is headed by its timestamp in milliseconds.
+    staircase; each column is headed by its timestamp in milliseconds. The columns are cut into pages no
+    wider than ``max_width_px`` (:func:`contact_sheets` returns them all); this draws page ``page``.
 
     Args:
         sample: The capture.
         tile_px: Tile ``(width, height)``, pixels.
         max_images: Show the first ``max_images`` images in time (None: all).
         crop: Zoom every camera onto the subject (:func:`crop_windows`) instead of the whole image.
+        page: Page index, from 0.
+        max_width_px: Widest page, pixels (None: one page however wide).
 
     Returns:
-        BGR image uint8 of shape ``(72 + V * th, 64 + C * tw, 3)`` for ``tile_px = (tw, th)`` and C
-        columns (:func:`sheet_columns`); the tile of column k, camera v starts at
-        ``(x, y) = (64 + k * tw, 72 + v * th)``.
+        BGR image uint8 of shape ``(72 + V * th, 64 + C * tw, 3)`` for ``tile_px = (tw, th)`` and the C
+        columns of this page (a slice of :func:`sheet_columns`); the tile of column k of the page, camera v
+        starts at ``(x, y) = (64 + k * tw, 72 + v * th)``.
     """
-    cols = sheet_columns(sample, max_images)
+    all_cols = sheet_columns(sample, max_images)
     V = sample.n_cameras
     tw, th = (int(x) for x in tile_px)
+    per_page = _sheet_per_page(tw, max_width_px) or max(1, len(all_cols))
+    n_pages = max(1, -(-len(all_cols) // per_page))
+    if not 0 <= page < n_pages:
+        raise IndexError(
+            f"sample {sample.name!r}: contact sheet page {page} out of range for {n_pages} pages"
+        )
+    first = page * per_page
+    cols = all_cols[first : first + per_page]
     left, top = 64, 72
     sheet = np.zeros((top + V * th, left + len(cols) * tw, 3), np.uint8)
     sheet[:] = (8, 8, 8)
-    windows = crop_windows(sample, aspect=tw / th, images=cols) if crop else None
+    windows = crop_windows(sample, aspect=tw / th, images=all_cols) if crop else None
     font = cv2.FONT_HERSHEY_SIMPLEX
-    shown = f"first {len(cols)} of {sample.n_images}" if len(cols) < sample.n_images else f"{sample.n_images}"
+    if len(cols) < sample.n_images:
+        shown = f"images {first + 1}-{first + len(cols)} of {sample.n_images}"
+    else:
+        shown = f"{sample.n_images} images"
+    pages = f", page {page + 1}/{n_pages}" if n_pages > 1 else ""
     title = (
-        f"{sample.name} [{sample.variant}]  {sample.motion_name}  {V} cameras, {shown} images; "
+        f"{sample.name} [{sample.variant}]  {motion_label(sample)}  {V} cameras, {shown}{pages}; "
         f"columns in time order (ms){', zoomed on the subject' if crop else ''}"
     )
     cv2.putText(sheet, title, (6, 20), font, 0.5, (235, 235, 235), 1, cv2.LINE_AA)
+    subjects = joint_subjects(sample.skeleton)
+    if subjects.any():
+        legend = [("observed joints:", (200, 200, 200))]
+        legend += [
+            (f"subject {chr(ord('a') + s)}", rgb_bgr_u8(SUBJECT_RGB[s % len(SUBJECT_RGB)][LEFT]))
+            for s in np.unique(subjects)
+        ]
+        legend += [("(lighter: left, darker: right)", (200, 200, 200))]
+    else:
+        legend = [
+            ("observed joints:", (200, 200, 200)),
+            ("left", side_bgr_u8(LEFT)),
+            ("right", side_bgr_u8(RIGHT)),
+            ("midline", side_bgr_u8(CENTRE)),
+        ]
     x = 6
-    for text, colour in (
-        ("observed joints:", (200, 200, 200)),
-        ("left", side_bgr_u8(LEFT)),
-        ("right", side_bgr_u8(RIGHT)),
-        ("midline", side_bgr_u8(CENTRE)),
-        ("missing joint: x at its true position", MISSING_BGR),
-    ):
+    for text, colour in [*legend, ("missing joint: x at its true position", MISSING_BGR)]:
         cv2.putText(sheet, text, (x, 42), font, 0.45, colour, 1, cv2.LINE_AA)
         x += cv2.getTextSize(text, font, 0.45, 1)[0][0] + 10
     for v in range(V):
@@ -235,6 +295,26 @@ def contact_sheet(
             sheet, f"{sample.timestamp_s[n] * 1000:.0f}", (x + 4, top - 8), font, 0.4, (200, 200, 200), 1
         )
     return sheet
+
+
+def contact_sheets(
+    sample: CaptureSample,
+    *,
+    tile_px: tuple[int, int] = (120, 160),
+    max_images: int | None = 48,
+    crop: bool = True,
+    max_width_px: int | None = MAX_SHEET_WIDTH_PX,
+) -> list[np.ndarray]:
+    """Every page of :func:`contact_sheet` (same arguments), in order; the first page first."""
+    n_cols = len(sheet_columns(sample, max_images))
+    per_page = _sheet_per_page(int(tile_px[0]), max_width_px) or max(1, n_cols)
+    n_pages = max(1, -(-n_cols // per_page))
+    return [
+        contact_sheet(
+            sample, tile_px=tile_px, max_images=max_images, crop=crop, page=p, max_width_px=max_width_px
+        )
+        for p in range(n_pages)
+    ]
 
 
 def write_video(

@@ -18,11 +18,12 @@ from gttdata.preview._gl import (
     offscreen_renderer,
     require,
 )
-from gttdata.preview._style import SIDE_RGB, bone_sides, joint_sides
+from gttdata.preview._style import LEFT, RIGHT, bone_rgb, joint_rgb, joint_sides
 from gttdata.skeleton import Skeleton
 
 __all__ = [
     "opengl_camera_pose",
+    "front_azimuth_deg",
     "orbit_camera",
     "render_joint_labels",
     "render_sample_3d",
@@ -92,6 +93,29 @@ def orbit_camera(
     return K, look_at(eye, centre)
 
 
+def front_azimuth_deg(points3d: np.ndarray, skeleton: Skeleton) -> float | None:
+    """Azimuth (degrees around world ``+z`` from ``+x``) of the direction the skeleton faces.
+
+    The facing direction is ``left x z`` for ``left`` the mean left joint minus the mean right joint
+    (``_style.joint_sides``), projected on the floor; None when the skeleton has no finite left/right pair.
+
+    Args:
+        points3d: World joints, metres, shape ``(J, 3)``.
+        skeleton: Topology of the J joints.
+    """
+    p = np.asarray(points3d, dtype=np.float64)
+    sides = joint_sides(skeleton)
+    ok = np.isfinite(p).all(axis=1)
+    lm, rm = ok & (sides == LEFT), ok & (sides == RIGHT)
+    if not lm.any() or not rm.any():
+        return None
+    left = p[lm].mean(axis=0) - p[rm].mean(axis=0)
+    fwd = np.cross(left * (1.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    if np.linalg.norm(fwd[:2]) < 1e-9:
+        return None
+    return float(np.rad2deg(np.arctan2(fwd[1], fwd[0])))
+
+
 def _material(pyrender, rgb: tuple[float, float, float]):
     return pyrender.MetallicRoughnessMaterial(
         baseColorFactor=(float(rgb[0]), float(rgb[1]), float(rgb[2]), 1.0),
@@ -130,21 +154,22 @@ def _skeleton_meshes(
     joint_radius_m: float,
     bone_radius_m: float,
 ) -> list:
-    """Joint spheres (instanced) and bone cylinders, one mesh per body side."""
+    """Joint spheres (instanced) and bone cylinders, one mesh per colour (``_style.joint_rgb``)."""
     p = np.asarray(points3d, dtype=np.float64)
     ok = np.isfinite(p).all(axis=1)
-    sides, bsides = joint_sides(skeleton), bone_sides(skeleton)
+    jrgb, brgb = joint_rgb(skeleton), bone_rgb(skeleton)
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=joint_radius_m)
     meshes = []
-    for side, rgb in enumerate(SIDE_RGB):
-        idx = np.flatnonzero((sides == side) & ok)
+    for rgb in np.unique(np.concatenate([jrgb, brgb]), axis=0):
+        idx = np.flatnonzero((jrgb == rgb).all(axis=1) & ok)
         if len(idx):
             poses = np.tile(np.eye(4), (len(idx), 1, 1))
             poses[:, :3, 3] = p[idx]
             meshes.append(pyrender.Mesh.from_trimesh(sphere, material=_material(pyrender, rgb), poses=poses))
         cyl = []
-        for (a, b), s in zip(skeleton.limbs, bsides, strict=True):
-            if s == side and ok[a] and ok[b] and np.linalg.norm(p[a] - p[b]) > 1e-6 and bone_radius_m > 0:
+        for (a, b), c in zip(skeleton.limbs, brgb, strict=True):
+            same = bool((c == rgb).all())
+            if same and ok[a] and ok[b] and np.linalg.norm(p[a] - p[b]) > 1e-6 and bone_radius_m > 0:
                 cyl.append(trimesh.creation.cylinder(radius=bone_radius_m, segment=(p[a], p[b]), sections=10))
         if cyl:
             meshes.append(
@@ -185,7 +210,8 @@ def render_view(
 ) -> np.ndarray:
     """Render the skeleton (bones as cylinders, joints as spheres) on a floor grid from a pinhole camera.
 
-    Left joints/bones are blue, right ones orange-red, midline grey (see ``_style.SIDE_RGB``).
+    Left joints/bones are blue, right ones orange-red, midline grey; several stacked subjects get one hue
+    each (see ``_style.joint_rgb``).
 
     Args:
         points3d: World joints, metres, shape ``(J, 3)``; non-finite joints are left out.
@@ -280,8 +306,17 @@ def _label(img: np.ndarray, text: str) -> None:
     cv2.putText(img, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
 
 
+#: The orbit view looks at the skeleton from this far off its front (degrees) and this far above the
+#: horizontal: a near-front view, in which left and right limbs stay apart (a side view crosses the legs).
+ORBIT_FROM_FRONT_DEG = 20.0
+ORBIT_ELEVATION_DEG = 15.0
+
+
 def render_sample_3d(sample: CaptureSample, *, tile_px: int = 320, time_s: float | None = None) -> np.ndarray:
     """One row of 3-D renders: from each rig camera's exact intrinsics and pose, then from an orbit camera.
+
+    The orbit camera takes a near-front view of the skeleton at that instant
+    (:func:`front_azimuth_deg` plus :data:`ORBIT_FROM_FRONT_DEG`, elevation :data:`ORBIT_ELEVATION_DEG`).
 
     For each camera the image closest to ``time_s`` is used (its own K, pose and ground-truth joints);
     the ground-truth 2-D projections are marked with small white rings, which sit on the rendered
@@ -316,7 +351,13 @@ def render_sample_3d(sample: CaptureSample, *, tile_px: int = 320, time_s: float
         _label(img, f"cam {v}  t={sample.timestamp_s[n]:.3f}s")
         tiles.append(np.pad(img, ((0, tile_px - img.shape[0]), (0, 2), (0, 0))))
     n = int(np.argmin(np.abs(sample.timestamp_s - t)))
-    K, T = orbit_camera(sample.points3d[n], image_size=(tile_px, tile_px))
+    front = front_azimuth_deg(sample.points3d[n], sample.skeleton)
+    K, T = orbit_camera(
+        sample.points3d[n],
+        azimuth_deg=30.0 if front is None else front + ORBIT_FROM_FRONT_DEG,
+        elevation_deg=ORBIT_ELEVATION_DEG,
+        image_size=(tile_px, tile_px),
+    )
     orbit = render_view(sample.points3d[n], sample.skeleton, K, T, (tile_px, tile_px))
     orbit = np.ascontiguousarray(orbit)
     _label(orbit, f"orbit  t={sample.timestamp_s[n]:.3f}s")
@@ -348,7 +389,8 @@ def render_samples(
 ) -> list[Path]:
     """Write the previews of each sample into ``out_dir``; returns the written paths.
 
-    Per sample (stem from :func:`sample_stem`): ``<stem>_contact.png`` (2-D overlays, cameras x time),
+    Per sample (stem from :func:`sample_stem`): ``<stem>_contact.png`` (2-D overlays, cameras x time;
+    further pages of at most 16 columns as ``<stem>_contact_p2.png``, ...),
     ``<stem>_3d.png`` (:func:`render_sample_3d`), ``<stem>_timestamps.png`` (raster, needs matplotlib)
     and, with ``video``, ``<stem>.mp4``.
 
@@ -367,7 +409,7 @@ def render_samples(
     """
     from tqdm import tqdm
 
-    from gttdata.preview.overlay import contact_sheet, write_video
+    from gttdata.preview.overlay import contact_sheets, write_video
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -375,8 +417,9 @@ def render_samples(
     samples = list(samples)
     for sample in tqdm(samples, desc="preview", unit="sample", disable=not progress, file=sys.stderr):
         stem = sample_stem(sample)
-        sheet = contact_sheet(sample, max_images=sheet_images)
-        written.append(_write_png(out_dir / f"{stem}_contact.png", cv2.cvtColor(sheet, cv2.COLOR_BGR2RGB)))
+        for page, sheet in enumerate(contact_sheets(sample, max_images=sheet_images)):
+            name = f"{stem}_contact.png" if page == 0 else f"{stem}_contact_p{page + 1}.png"
+            written.append(_write_png(out_dir / name, cv2.cvtColor(sheet, cv2.COLOR_BGR2RGB)))
         if render_3d is not False:
             try:
                 written.append(_write_png(out_dir / f"{stem}_3d.png", render_sample_3d(sample)))

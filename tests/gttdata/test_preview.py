@@ -18,9 +18,33 @@ from gttdata.capture.sample import CaptureSample
 from gttdata.cli import main
 from gttdata.generate_plan import build_sample
 from gttdata.preview import _gl
-from gttdata.preview._style import CENTRE, LEFT, RIGHT, SIDE_RGB, joint_sides, side_bgr_u8
-from gttdata.preview.overlay import MISSING_BGR, contact_sheet, draw_overlay, sheet_columns, write_video
-from gttdata.preview.render import opengl_camera_pose, render_joint_labels, render_samples, render_view
+from gttdata.preview._style import (
+    CENTRE,
+    LEFT,
+    RIGHT,
+    SIDE_RGB,
+    joint_rgb,
+    joint_sides,
+    joint_subjects,
+    side_bgr_u8,
+)
+from gttdata.preview.overlay import (
+    MAX_SHEET_WIDTH_PX,
+    MISSING_BGR,
+    contact_sheet,
+    contact_sheets,
+    draw_overlay,
+    motion_label,
+    sheet_columns,
+    write_video,
+)
+from gttdata.preview.render import (
+    front_azimuth_deg,
+    opengl_camera_pose,
+    render_joint_labels,
+    render_samples,
+    render_view,
+)
 from gttdata.recipe import load_recipe
 from gttdata.skeleton import Skeleton, cmu31
 
@@ -220,9 +244,57 @@ def test_write_video_has_one_frame_per_image(tiny_sample, tmp_path):
 
 def test_render_samples_writes_2d_without_gl(tiny_sample, tmp_path):
     pytest.importorskip("matplotlib")
-    paths = render_samples([tiny_sample], tmp_path, progress=False, render_3d=False)
-    assert [p.name for p in paths] == ["train-000000_contact.png", "train-000000_timestamps.png"]
+    paths = render_samples([tiny_sample], tmp_path, progress=False, render_3d=False, sheet_images=24)
+    names = ["train-000000_contact.png", "train-000000_contact_p2.png", "train-000000_timestamps.png"]
+    assert [p.name for p in paths] == names
     assert all(cv2.imread(str(p)) is not None for p in paths)
+
+
+def test_contact_sheet_pages_cap_the_width_and_cover_every_image(tiny_sample):
+    """48 images of 120 px no longer make one 5,824 px strip: pages of at most 16 columns, in time order."""
+    pages = contact_sheets(tiny_sample, max_images=None)
+    per_page = (MAX_SHEET_WIDTH_PX - 64) // 120
+    assert len(pages) == -(-tiny_sample.n_images // per_page) >= 2
+    assert all(p.shape[1] <= MAX_SHEET_WIDTH_PX for p in pages)
+    assert sum((p.shape[1] - 64) // 120 for p in pages) == tiny_sample.n_images
+    one = contact_sheet(tiny_sample, max_images=None, max_width_px=None)
+    assert one.shape[1] == 64 + 120 * tiny_sample.n_images
+    with pytest.raises(IndexError, match="page"):
+        contact_sheet(tiny_sample, max_images=None, page=len(pages))
+
+
+def test_two_subjects_get_distinct_colours_and_separate_motion_names():
+    from gttdata.capture.simulate import merge_subjects
+    from gttdata.mocap.procedural import generate_motion
+
+    a, b = generate_motion("walk", seed=1, duration_s=1.0), generate_motion("jog", seed=2, duration_s=1.0)
+    sk = merge_subjects([a, b], np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])).skeleton
+    subj = joint_subjects(sk)
+    assert subj.tolist() == [0] * a.skeleton.n_joints + [1] * a.skeleton.n_joints
+    rgb = joint_rgb(sk)
+    assert not {tuple(c) for c in rgb[subj == 0]} & {tuple(c) for c in rgb[subj == 1]}
+    assert not joint_subjects(a.skeleton).any()
+    assert np.allclose(joint_rgb(a.skeleton), np.array(SIDE_RGB)[joint_sides(a.skeleton)])
+
+    class _S:
+        meta = {
+            "n_subjects": 2,
+            "motions": [{"name": "x/walk", "subject": 0}, {"name": "y/jog", "subject": 1}],
+        }
+        motion_name = "x/walk|y/jog"
+
+    assert motion_label(_S()) == "a: x/walk, b: y/jog"
+
+
+def test_front_azimuth_follows_the_facing_direction():
+    """A skeleton whose left side points to +y faces +x (left x z); turned 90 degrees it faces +y."""
+    sk = cmu31()
+    sides = joint_sides(sk)
+    p = np.zeros((sk.n_joints, 3))
+    p[sides == LEFT, 1], p[sides == RIGHT, 1] = 0.2, -0.2
+    assert front_azimuth_deg(p, sk) == pytest.approx(0.0, abs=1e-9)
+    turned = p @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +90 deg about z
+    assert front_azimuth_deg(turned, sk) == pytest.approx(90.0, abs=1e-9)
 
 
 def test_plot_dataset_writes_nonempty_pngs(tiny_dataset, tmp_path):

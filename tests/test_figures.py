@@ -1,0 +1,82 @@
+"""Every committed figure in docs/figures is what its documented command writes today.
+
+The preview figures are remade by running the bash block of ``docs/figures/README.md`` as written (through
+click's CliRunner, with ``/tmp/gtt-figures`` moved into a temporary folder): each ``cp SRC DST`` line is
+checked as "SRC matches the committed DST" instead of copied. The sweep figures are re-plotted from the
+committed table of the evaluation they come from (``docs/figures/sweep_errors.csv``); the full evaluation
+that writes that table is the slow test at the end.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+ROOT = Path(__file__).resolve().parents[1]
+FIGURES = ROOT / "docs" / "figures"
+README = FIGURES / "README.md"
+
+
+def _commands() -> list[list[str]]:
+    """The first bash block of the figures README, one argv per command (continuation lines joined)."""
+    block = re.search(r"```bash\n(.*?)```", README.read_text(), re.S).group(1)
+    return [shlex.split(line) for line in block.replace("\\\n", " ").splitlines() if line.strip()]
+
+
+def _copies() -> list[tuple[str, str]]:
+    return [(c[1], c[2]) for c in _commands() if c[0] == "cp"]
+
+
+def assert_images_match(made: Path, committed: Path, *, max_mean: float = 0.5, max_frac: float = 0.002):
+    """Same size; mean absolute difference under ``max_mean`` (0-255) and under ``max_frac`` of the pixels
+    differing by more than 40 in any channel (anti-aliasing and font rasterisation may differ a little)."""
+    a, b = cv2.imread(str(made)), cv2.imread(str(committed))
+    assert a is not None, f"{made}: not written"
+    assert a.shape == b.shape, f"{committed.name}: committed {b.shape}, the command makes {a.shape}"
+    d = np.abs(a.astype(np.int16) - b.astype(np.int16))
+    frac = float((d.max(axis=2) > 40).mean())
+    assert d.mean() <= max_mean and frac <= max_frac, (
+        f"{committed.name}: mean |diff| {d.mean():.3f}, {100 * frac:.2f} % of pixels differ; "
+        "rerun the commands in docs/figures/README.md and commit the result"
+    )
+
+
+@pytest.fixture(scope="module")
+def remade(tmp_path_factory) -> Path:
+    """Run the figures README's gttdata commands into a temporary folder; returns that folder."""
+    from gttdata.cli import main
+
+    tmp = tmp_path_factory.mktemp("gtt-figures")
+    runner = CliRunner()
+    for argv in _commands():
+        if argv[0] == "cp":
+            continue
+        assert argv[0] == "gttdata", f"docs/figures/README.md: unexpected command {argv[0]!r}"
+        args = [a.replace("/tmp/gtt-figures", str(tmp)) for a in argv[1:]]
+        res = runner.invoke(main, args, catch_exceptions=False)
+        assert res.exit_code == 0, f"{shlex.join(argv)}\n{res.output}"
+    return tmp
+
+
+def test_figures_readme_documents_every_preview_figure():
+    documented = {Path(dst).name for _, dst in _copies()}
+    assert documented == {"contact_sheet.png", "timestamp_raster.png", "skeleton_3d.png"}
+
+
+@pytest.mark.parametrize("src,dst", _copies(), ids=[Path(d).name for _, d in _copies()])
+def test_preview_figure_matches_its_command(remade, src, dst):
+    made = Path(src.replace("/tmp/gtt-figures", str(remade)))
+    if dst.endswith("_3d.png") or "skeleton_3d" in dst:
+        from gttdata.preview import _gl
+
+        try:
+            _gl.offscreen_renderer(8, 8)
+        except (_gl.RendererUnavailableError, _gl.PreviewDependencyError) as exc:
+            pytest.skip(f"no offscreen GL: {exc}")
+    assert_images_match(made, ROOT / dst)
