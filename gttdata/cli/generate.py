@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -11,7 +12,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gttdata.cli import friendly_errors
-from gttdata.cli.inspect import format_summary  # light: both import only click at module level
+from gttdata.cli.inspect import dataset_summary, format_summary  # light: both import only click at module level
 from gttdata.cli.verify import repo_manifests_dir
 
 if TYPE_CHECKING:
@@ -20,15 +21,15 @@ if TYPE_CHECKING:
 __all__ = ["generate_cmd", "register"]
 
 
-def _preview(manifest: Manifest, root: Path, n: int) -> None:
+def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> list[Path]:
     """Render the first ``n`` samples of the first split with gttdata.preview.render, when installed."""
     from gttdata.shards.collection import DatasetReader
 
     try:
         from gttdata.preview.render import render_samples
     except ImportError as exc:
-        click.echo(f"--preview: skipped, the preview renderer is not available ({exc})")
-        return
+        click.echo(f"--preview: skipped, the preview renderer is not available ({exc})", err=True)
+        return []
     split = next(iter(manifest.splits))
     reader = DatasetReader(root, split, manifest=manifest)
     samples = [reader.read_sample(i) for i in range(min(n, len(reader)))]
@@ -37,11 +38,16 @@ def _preview(manifest: Manifest, root: Path, n: int) -> None:
         inspect.signature(render_samples).bind(samples, out)
     except TypeError:
         click.echo(
-            f"--preview: skipped, render_samples{inspect.signature(render_samples)} does not take (samples, out_dir)"
+            f"--preview: skipped, render_samples{inspect.signature(render_samples)} does not take (samples, out_dir)",
+            err=True,
         )
-        return
-    result = render_samples(samples, out)
-    click.echo(f"previews of {len(samples)} {split} samples in {out}" + (f": {result}" if result else ""))
+        return []
+    written = [Path(p) for p in render_samples(samples, out, progress=not quiet) or []]
+    if not quiet:
+        click.echo(f"previews of {len(samples)} {split} sample{'s' if len(samples) > 1 else ''} in {out}:")
+        for p in written:
+            click.echo(f"  {p.name}")
+    return written
 
 
 @click.command("generate")
@@ -66,6 +72,12 @@ def _preview(manifest: Manifest, root: Path, n: int) -> None:
     "--preview", type=click.IntRange(min=0), default=0, metavar="N", help="Render N samples afterwards."
 )
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object (dataset summary, timing) and nothing else.",
+)
 @friendly_errors
 def generate_cmd(
     recipe_path: Path,
@@ -77,22 +89,27 @@ def generate_cmd(
     register_: bool,
     preview: int,
     progress: bool,
+    as_json: bool,
 ) -> None:
     """Simulate the captures of RECIPE into HDF5 shards, then write and verify manifest.json.
 
-    Example: gttdata generate recipes/gttdata/tiny.yaml seed=3 --workers 2 --out /tmp/tiny
+    \b
+    Examples:
+      gttdata generate recipes/gttdata/tiny.yaml --out /tmp/tiny
+      gttdata generate recipes/gttdata/tiny.yaml seed=3 --workers 2 --out /tmp/tiny_seed3 --json
     """
     from gttdata.generation import generate_dataset, parse_shard_range, plan_blocks
     from gttdata.manifest import register_manifest
     from gttdata.recipe import load_recipe
 
+    echo = (lambda *a, **k: None) if as_json else click.echo
     recipe = load_recipe(recipe_path, overrides)
     if out is not None:
         recipe = dataclasses.replace(recipe, output_dir=str(out))
     blocks = plan_blocks(recipe)
     chosen = parse_shard_range(shard_range, len(blocks))
     n = sum(blocks[i].n_samples for i in chosen)
-    click.echo(
+    echo(
         f"{recipe.name}: {n} samples in {len(chosen)} of {len(blocks)} shards -> {recipe.output_dir} "
         f"({workers} worker{'s' if workers > 1 else ''}{', resume' if resume else ''})"
     )
@@ -102,24 +119,41 @@ def generate_cmd(
     )
     seconds = time.perf_counter() - t0
     if manifest is None:
+        if as_json:
+            click.echo(
+                json.dumps({"output_dir": str(recipe.output_dir), "complete": False, "seconds": seconds})
+            )
+            return
         click.echo(
             f"shards {chosen.start}:{chosen.stop} done in {seconds:.1f} s; other shards are missing, so the manifest "
             f"is written by the job that completes the dataset (or: gttdata manifest {recipe.output_dir})"
         )
         return
     for line in format_summary(manifest):
-        click.echo(line)
+        echo(line)
     total = manifest.statistics
-    click.echo(
-        f"{seconds:.1f} s: {n / seconds:.1f} samples/s, "
-        f"{total.get('n_images', 0) * n / max(manifest.n_samples(), 1) / seconds:.0f} images/s; "
-        f"manifest {Path(recipe.output_dir) / 'manifest.json'} verified"
-    )
+    images_per_s = total.get("n_images", 0) * n / max(manifest.n_samples(), 1) / seconds
     root = Path(recipe.output_dir)
-    if register_:
-        click.echo(f"registered {register_manifest(manifest, repo_manifests_dir(), location=root)}")
-    if preview:
-        _preview(manifest, root, preview)
+    echo(
+        f"{seconds:.1f} s: {n / seconds:.1f} samples/s, {images_per_s:.0f} images/s; "
+        f"manifest {root / 'manifest.json'} verified"
+    )
+    registered = register_manifest(manifest, repo_manifests_dir(), location=root) if register_ else None
+    if registered is not None:
+        echo(f"registered {registered}")
+    written = _preview(manifest, root, preview, quiet=as_json) if preview else []
+    if as_json:
+        report = {
+            **dataset_summary(manifest, root),
+            "samples_written": n,
+            "seconds": round(seconds, 3),
+            "samples_per_s": round(n / seconds, 3),
+            "images_per_s": round(images_per_s, 1),
+            "manifest": str(root / "manifest.json"),
+            "registered": None if registered is None else str(registered),
+            "previews": [str(p) for p in written],
+        }
+        click.echo(json.dumps(report))
 
 
 def register(main: click.Group) -> None:

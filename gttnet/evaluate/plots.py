@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gttnet.evaluate.summary import error_bar
+from gttnet.evaluate.summary import mean_interval
 
 __all__ = ["plot_sweeps", "plot_runtime", "plot_affinity"]
 
@@ -23,8 +23,9 @@ def _pyplot():
 def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
     """One figure per swept condition: MPJPE vs value, a line per method, a panel per sequencing condition.
 
-    Points are the mean over sequences with ``recipe.error_bars`` (``ci95``: 95% t-interval of the mean;
-    ``std``: sample standard deviation), or with ``recipe.plot_statistic == "median"`` the median with
+    Points are the mean over sequences with ``recipe.error_bars`` (``ci95``: 95% percentile-bootstrap
+    interval of the mean; ``std``: sample standard deviation clipped at zero, see
+    :func:`~gttnet.evaluate.summary.mean_interval`, so no bar reaches below zero error), or with ``recipe.plot_statistic == "median"`` the median with
     the interquartile range; the figure title says which.
 
     Args:
@@ -40,7 +41,7 @@ def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
     labels = {s.name: s.label or s.variable for s in recipe.sweeps}
     methods = [m.name for m in recipe.methods]
     median = recipe.plot_statistic == "median"
-    bars = "95% CI of the mean" if recipe.error_bars == "ci95" else "±1 std"
+    bars = "95% bootstrap CI of the mean" if recipe.error_bars == "ci95" else "±1 std, clipped at 0"
     bars = "median, bars: interquartile range" if median else f"mean, bars: {bars}"
     paths = []
     for cond in dict.fromkeys(r["condition"] for r in rows):
@@ -58,8 +59,9 @@ def plot_sweeps(rows: list[dict], recipe, out_dir: str | Path) -> list[Path]:
                     q = np.array([np.percentile(v, [25, 50, 75]) for v in vals])
                     ys, es = q[:, 1], np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]])
                 else:
-                    ys = [v.mean() for v in vals]
-                    es = [error_bar(v, recipe.error_bars) for v in vals]
+                    ys = np.array([v.mean() for v in vals])
+                    iv = np.array([mean_interval(v, recipe.error_bars) for v in vals]).reshape(-1, 2)
+                    es = np.stack([ys - iv[:, 0], iv[:, 1] - ys])
                 ax.errorbar(xs, ys, yerr=es, marker="o", ms=4, capsize=3, label=m, color=f"C{k}")
             ax.set_title(f"sequencing: {seq}")
             ax.set_xlabel(labels.get(cond, cond))

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-__all__ = ["GroupStats", "group_stats", "error_bar", "summary_markdown", "write_summary"]
+__all__ = ["GroupStats", "group_stats", "error_bar", "mean_interval", "summary_markdown", "write_summary"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,29 @@ def error_bar(values: np.ndarray, kind: str) -> float:
         return 0.0
     sd = float(values.std(ddof=1))
     return sd if kind == "std" else float(stats.t.ppf(0.975, n - 1) * sd / np.sqrt(n))
+
+
+def mean_interval(values: np.ndarray, kind: str, *, n_boot: int = 4000, seed: int = 0) -> tuple[float, float]:
+    """Interval drawn around the mean in the sweep plots, ``(low, high)``.
+
+    ``ci95``: the 95 % percentile-bootstrap interval of the mean (``n_boot`` resamples, fixed ``seed``), which
+    stays inside the range of the values, so an error is never drawn below zero; ``std``: mean +- one sample
+    standard deviation, clipped at zero. A single value gives ``(value, value)``.
+
+    Args:
+        values: Per-sequence errors (non-negative), shape ``(n,)``.
+        kind: ``ci95`` or ``std``.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    m = float(v.mean())
+    if v.shape[0] < 2:
+        return m, m
+    if kind == "std":
+        sd = float(v.std(ddof=1))
+        return max(m - sd, 0.0), m + sd
+    idx = np.random.default_rng(seed).integers(0, v.shape[0], size=(n_boot, v.shape[0]))
+    lo, hi = np.percentile(v[idx].mean(axis=1), [2.5, 97.5])
+    return float(lo), float(hi)
 
 
 def group_stats(rows: list[dict]) -> list[GroupStats]:
@@ -108,7 +131,11 @@ def summary_markdown(
         The Markdown text.
     """
     st = group_stats(rows)
-    bars = "95% t-interval of the mean" if error_bars == "ci95" else "± one sample standard deviation"
+    bars = (
+        "95% bootstrap interval of the mean"
+        if error_bars == "ci95"
+        else "± one sample standard deviation, clipped at zero"
+    )
     if statistic == "median":
         bars = "median with the interquartile range"
     lines = [

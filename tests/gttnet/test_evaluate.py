@@ -10,7 +10,7 @@ import pytest
 from gttnet.evaluate import run as run_mod
 from gttnet.evaluate.recipe import EvalRecipeError, RuntimeSpec, load_eval_recipe, parse_eval_recipe
 from gttnet.evaluate.run import CSV_FIELDS, evaluate, plan_jobs, read_rows
-from gttnet.evaluate.summary import error_bar, group_stats
+from gttnet.evaluate.summary import error_bar, group_stats, mean_interval
 
 RECIPES = sorted(glob.glob("recipes/gttnet/eval_*.yaml") + glob.glob("recipes/gttnet/ablation_*.yaml"))
 
@@ -117,7 +117,7 @@ def test_tiny_run_summary_and_plots(tiny_run):
     _, out = tiny_run
     text = (out / "summary.md").read_text()
     assert "## noise" in text and "| full | pseudo |" in text and "skip" in text
-    assert "95% t-interval" in text
+    assert "95% bootstrap interval" in text
     assert (out / "sweep_noise.png").stat().st_size > 1000
     assert (out / "recipe.json").is_file()
 
@@ -142,6 +142,21 @@ def test_group_stats_and_error_bars():
     assert g.std_mm == pytest.approx(1.0)
     assert error_bar(np.array([1.0, 2.0, 3.0]), "ci95") == pytest.approx(4.302653 / np.sqrt(3), rel=1e-5)
     assert error_bar(np.array([1.0, 2.0, 3.0]), "std") == pytest.approx(1.0)
+
+
+def test_mean_interval_never_reaches_below_zero():
+    """n = 2 with a t-interval drew bars to -40 mm; the bootstrap interval stays within the data's range."""
+    v = np.array([2.0, 60.0])
+    assert 31.0 - error_bar(v, "ci95") < -300  # the old bar
+    lo, hi = mean_interval(v, "ci95")
+    assert 2.0 <= lo <= 31.0 <= hi <= 60.0
+    assert mean_interval(v, "ci95") == (lo, hi)  # fixed seed: plots are reproducible
+    assert mean_interval(v, "std")[0] == 0.0
+    w = np.random.default_rng(0).gamma(2.0, 5.0, size=200)
+    lo, hi = mean_interval(w, "ci95")
+    half = error_bar(w, "ci95")  # large n: the bootstrap agrees with the t-interval
+    assert lo == pytest.approx(w.mean() - half, rel=0.05) and hi == pytest.approx(w.mean() + half, rel=0.05)
+    assert mean_interval(np.array([4.0]), "ci95") == (4.0, 4.0)
 
 
 def test_resume_skips_done_jobs(tmp_path, monkeypatch):

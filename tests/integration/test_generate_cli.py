@@ -51,9 +51,28 @@ def test_generate_verify_inspect(reference):
     out = _run("verify", str(reference)).output
     assert "OK (3 shards, 8 samples)" in out
     out = _run("inspect", str(reference)).output
-    assert re.search(r"train\s+1\s+4\s+96", out) and "variants:  orig, global_rotation" in out
+    assert re.search(r"train\s+1\s+4\s+96", out) and "variants   orig, global_rotation" in out
+    assert "radius 3 m" in out and "{" not in out and "PosixPath" not in out, out
     out = _run("inspect", str(reference / "train/shard-00000.h5"), "--sample", "2").output
-    assert "sample 2: train/000002" in out and "keypoints_px" in out and "(24, 31, 2)" in out
+    assert "sample 2: train/000002" in out and re.search(r"keypoints_px\s+24 x 31 x 2\s+float32", out)
+    assert "(" not in out.split("sample 2:")[1], out  # no tuple reprs in the array table
+
+
+def test_inspect_and_generate_json(reference, tmp_path):
+    import json
+
+    data = json.loads(_run("inspect", str(reference), "--json").output)
+    assert data["dataset"] == "tiny" and data["splits"]["train"]["samples"] == 4
+    assert data["splits"]["total"]["images"] == 192 and data["variants"] == ["orig", "global_rotation"]
+    shard = json.loads(
+        _run("inspect", str(reference / "test/shard-00000.h5"), "--sample", "1", "--json").output
+    )
+    arrays = {a["name"]: a for a in shard["sample"]["arrays"]}
+    assert shard["split"] == "test" and arrays["points3d"]["shape"] == [24, 31, 3]
+    gen = json.loads(_run("generate", TINY, "--out", str(tmp_path), "--no-progress", "--json").output)
+    assert gen["splits"] == data["splits"] and gen["samples_written"] == 8 and gen["seconds"] > 0
+    bad = _run("inspect", str(reference / "test/shard-00000.h5"), "--sample", "9", ok=False)
+    assert bad.exit_code == 2 and "holds samples 0-1, got 9" in bad.output
 
 
 def test_workers_give_identical_bytes(reference, tmp_path):
