@@ -12,7 +12,10 @@ from typing import TYPE_CHECKING
 import click
 
 from gttdata.cli import friendly_errors
-from gttdata.cli.inspect import dataset_summary, format_summary  # light: both import only click at module level
+from gttdata.cli.inspect import (  # light: both import only click at module level
+    dataset_summary,
+    format_summary,
+)
 from gttdata.cli.verify import repo_manifests_dir
 
 if TYPE_CHECKING:

@@ -266,4 +266,6 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
         if deltas[-1] < params.tol:
             break
     log.info("dloe: %d rounds, last dX %.3g", len(deltas), deltas[-1] if deltas else float("nan"))
-    return Reconstruction(points3d=X, affinity=A, info={"iterations": len(deltas), "delta_inch": deltas})
+    # Outputs are metres: the per-round change is reported in metres (the tolerance above works in inches).
+    delta_m = [d / _INCH_PER_M for d in deltas]
+    return Reconstruction(points3d=X, affinity=A, info={"iterations": len(deltas), "delta_m": delta_m})

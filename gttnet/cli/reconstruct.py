@@ -430,6 +430,12 @@ def reconstruct_cmd(
         seed=seed,
     )
     loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
+    if sequencing is None:
+        click.echo(
+            f"sequencing: {obs.sequencing} (the richest the input supports; "
+            "choose with --sequencing none|partial|full)",
+            err=True,
+        )
     check_sequencing(obs, spec_m)
     try:
         if subjects > 1:

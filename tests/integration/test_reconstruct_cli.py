@@ -136,5 +136,6 @@ def test_dataset_directory_input(tmp_path):
     res = _run(tmp_path / "ds", "--sample", 1, "--method", "pseudo", "--json")
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["sequencing"] == "full"
+    assert "sequencing: full (the richest" in res.stderr  # a defaulted sequencing is said, never silent
     res = _run(tmp_path / "ds", "--sample", 10_000, "--json")
     assert res.exit_code != 0 and "out of range" in res.output
