@@ -79,6 +79,7 @@ def write_reconstruction(
     for k, v in (extra or {}).items():
         arrays[k] = np.asarray(v)
     attrs.update(extra_attrs or {})
+    path.parent.mkdir(parents=True, exist_ok=True)  # --out runs/rec.h5 on a fresh checkout
     tmp = path.with_name(path.name + ".tmp")
     if suffix == ".npz":
         with open(tmp, "wb") as fh:
