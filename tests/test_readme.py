@@ -138,6 +138,33 @@ CHECKS: dict[str, Check] = {
         lambda out: "verified" in out or pytest.fail(out),
     ),
     "gttnet reconstruct data/gttdata/multi_subject/test/shard-00000.h5 --subjects 2": (None, _check_subjects),
+    "gttdata generate recipes/gttdata/tiny.yaml --resume": (
+        lambda a: [*a, "--no-progress"],
+        lambda out: "data/gttdata/tiny/manifest.json verified" in out or pytest.fail(out),
+    ),
+    "gttdata export data/gttdata/tiny": (
+        lambda a: a,
+        lambda out: "-> runs/recording/project.toml" in out or pytest.fail(out),
+    ),
+    "ls runs/recording": (
+        lambda a: a,
+        lambda out: (
+            {"cam_0", "calibration.toml", "project.toml", "ground_truth.npz"} <= set(out.split())
+            or pytest.fail(out)
+        ),
+    ),
+    "gttnet reconstruct runs/recording/project.toml": (
+        None,
+        lambda out: 0 < _json(out)["mpjpe_mm"] < 150 or pytest.fail(out),
+    ),
+    "gttnet reconstruct --calibration runs/recording/calibration.toml": (
+        None,
+        lambda out: "-> runs/recording/result.csv" in out or pytest.fail(out),
+    ),
+    "gttnet render runs/recording/result.h5": (
+        None,
+        lambda out: re.search(r"reprojection error [\d.]+ px .*cam_0\.mp4", out) or pytest.fail(out),
+    ),
 }
 
 
@@ -151,6 +178,8 @@ def _invoke(argv: list[str]) -> str:
     from gttdata.cli import main as gttdata_main
     from gttnet.cli import main as gttnet_main
 
+    if argv[0] == "ls":  # the README lists a folder the previous example wrote
+        return "\n".join(sorted(os.listdir(argv[1])))
     mains = {"gttdata": gttdata_main, "gttnet": gttnet_main}
     assert argv[0] in mains, f"README: unexpected program {argv[0]!r}"
     res = CliRunner().invoke(mains[argv[0]], argv[1:], catch_exceptions=False)
