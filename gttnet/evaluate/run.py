@@ -42,6 +42,7 @@ CSV_FIELDS: tuple[str, ...] = (
     "seconds",
     "status",
     "note",
+    "offset_err_frames",
 )
 
 
@@ -194,6 +195,7 @@ def _row(job: Job, seq: str, name: str, n: int, **fields) -> dict:
         "seconds": "",
         "status": "ok",
         "note": "",
+        "offset_err_frames": "",
     }
     row.update(fields)
     row["note"] = " ".join(str(row["note"]).split())  # one line per row: resume counts lines
@@ -232,6 +234,7 @@ def run_job(recipe: EvalRecipe, job: Job, todo: frozenset[tuple[str, str]] | Non
                 rows.append(_row(job, seq, entry.name, obs.n_images, status="error", note=str(exc)[:200]))
                 continue
             tau = "" if rec.order is None else f"{kendall_tau(rec.order, gt.global_order):.4f}"
+            offset = _offset_error_frames(obs, rec, gt)
             rows.append(
                 _row(
                     job,
@@ -241,9 +244,22 @@ def run_job(recipe: EvalRecipe, job: Job, todo: frozenset[tuple[str, str]] | Non
                     mpjpe_mm=f"{mpjpe_mm(rec.points3d, gt.points3d):.4f}",
                     kendall_tau=tau,
                     seconds=f"{rec.seconds:.4f}",
+                    offset_err_frames="" if offset is None else f"{offset:.4f}",
                 )
             )
     return rows
+
+
+def _offset_error_frames(obs, rec: Reconstruction, gt) -> float | None:
+    """Median over cameras of the recovered clock's error in that camera's frames (one common shift
+    removed: it is unobservable), for methods that recover clocks (``info["clocks"]``); else None."""
+    clocks = rec.info.get("clocks")
+    if not clocks or "timestamp_s" not in rec.info:
+        return None
+    err = np.asarray(rec.info["timestamp_s"]) - gt.timestamp_s
+    err -= np.median(err)
+    per = [abs(float(np.median(err[obs.cam_id == c["camera"]]))) * c["rate_hz"] for c in clocks["cameras"]]
+    return float(np.median(per))
 
 
 def read_rows(path: str | Path) -> list[dict]:

@@ -292,3 +292,18 @@ def test_simulated_views_carry_each_cameras_own_clock():
     clocks = recover_clocks(obs)  # rates and dropped frames come from the views' own clocks
     np.testing.assert_allclose(np.sort(clocks.rate_hz), [25.0, 25.0, 30.0, 60.0], rtol=1e-6)
     assert np.abs(_frame_errors(obs, gt.timestamp_s, clocks)).max() < 0.25
+
+
+def test_evaluation_records_the_offset_error(capture):
+    from gttnet.evaluate.recipe import MethodEntry
+    from gttnet.evaluate.run import _offset_error_frames, run_method
+
+    obs, gt = make_view(capture, "partial")
+    rec = run_method(obs, MethodEntry(method="sync", options={"fps": {0: 25.0, 1: 30.0, 2: 60.0}}))
+    err = _offset_error_frames(obs, rec, gt)
+    assert err is not None and 0.0 <= err < 0.1
+    # Truth moved by half a frame for two of the three cameras: the median over cameras sees it.
+    shift = np.select([obs.cam_id == 0, obs.cam_id == 1], [0.5 / 25.0, -0.5 / 30.0], 0.0)
+    assert _offset_error_frames(obs, rec, replace(gt, timestamp_s=gt.timestamp_s + shift)) > 0.4
+    hpf = run_method(make_view(capture, "full")[0], MethodEntry(method="hpf"))
+    assert _offset_error_frames(obs, hpf, gt) is None
