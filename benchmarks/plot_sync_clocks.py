@@ -42,14 +42,23 @@ def main() -> None:
     t = clock_times(obs, clocks)
     shift = np.median(t - gt.timestamp_s)
     true_off = np.array(
-        [np.median(gt.timestamp_s[obs.cam_id == c] - obs.stream_time_s[obs.cam_id == c]) for c in clocks.cameras]
+        [
+            np.median(gt.timestamp_s[obs.cam_id == c] - obs.stream_time_s[obs.cam_id == c])
+            for c in clocks.cameras
+        ]
     )
     est_off = clocks.offset_s - shift
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8), gridspec_kw={"width_ratios": [1, 1.6]})
     lo, hi = true_off.min() - 0.3, true_off.max() + 0.3
     a.plot([lo, hi], [lo, hi], color="0.7", lw=1)
     for k, c in enumerate(clocks.cameras):
-        a.errorbar(true_off[k], est_off[k], yerr=clocks.offset_std_s[k], fmt="o", label=f"camera {c} ({clocks.rate_hz[k]:g} Hz)")
+        a.errorbar(
+            true_off[k],
+            est_off[k],
+            yerr=clocks.offset_std_s[k],
+            fmt="o",
+            label=f"camera {c} ({clocks.rate_hz[k]:g} Hz)",
+        )
     a.set_xlabel("true offset (s)")
     a.set_ylabel("recovered offset (s)")
     a.set_title("offset of each camera's clock")
@@ -57,7 +66,13 @@ def main() -> None:
     for k, c in enumerate(clocks.cameras):
         sel = obs.cam_id == c
         err = (t[sel] - shift - gt.timestamp_s[sel]) * clocks.rate_hz[k]
-        b.plot(gt.timestamp_s[sel], err, ".", ms=3, label=f"camera {c}: median |error| {np.median(np.abs(err)):.3f} frame")
+        b.plot(
+            gt.timestamp_s[sel],
+            err,
+            ".",
+            ms=3,
+            label=f"camera {c}: median |error| {np.median(np.abs(err)):.3f} frame",
+        )
     b.axhline(0.0, color="0.7", lw=1)
     b.set_xlabel("true capture time (s)")
     b.set_ylabel("recovered - true time (frames)")
@@ -68,8 +83,10 @@ def main() -> None:
     tmp = args.out + ".tmp.png"
     fig.savefig(tmp, dpi=110)
     os.replace(tmp, args.out)
-    print(f"wrote {args.out}: offsets true {np.round(true_off - true_off.min(), 4)} s, "
-          f"recovered {np.round(est_off - true_off.min(), 4)} s")
+    print(
+        f"wrote {args.out}: offsets true {np.round(true_off - true_off.min(), 4)} s, "
+        f"recovered {np.round(est_off - true_off.min(), 4)} s"
+    )
 
 
 if __name__ == "__main__":
