@@ -74,11 +74,27 @@ def _method_default() -> str:
     return "auto" if "auto" in available_methods() else "dloe"
 
 
+class _WarningLines(logging.Handler):
+    """Echo a library logger's warnings as ``warning: ...`` lines on stderr (docs/CLI.md)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        click.echo(f"warning: {record.getMessage()}", err=True)
+
+
 def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
-    """Recording view plus the ground truth an exported project names (scoring only)."""
+    """Recording view plus the ground truth an exported project names (scoring only).
+
+    The calibration's unit detection and plausibility warnings become ``warning:`` lines on stderr.
+    """
     from gttdata.recording import Recording, ground_truth_for
 
-    rec = Recording.load(spec)
+    cal_log = logging.getLogger("gttdata.calibration")
+    handler = _WarningLines(logging.WARNING)
+    cal_log.addHandler(handler)
+    try:
+        rec = Recording.load(spec)
+    finally:
+        cal_log.removeHandler(handler)
     view = rec.view(
         sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
     )

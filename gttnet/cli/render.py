@@ -94,12 +94,23 @@ def render_cmd(
     out = out or result.with_name(result.stem + "_render")
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise click.ClickException(f"{out}: exists and is not empty; pass --overwrite to write into it")
+    import logging
+
+    from gttnet.cli.reconstruct import _WarningLines
+
+    warn = _WarningLines(logging.WARNING)
+    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttnet.apps.render")]
+    for lg in loggers:
+        lg.addHandler(warn)
     try:
         written = render_result(
             result, out, spec=spec, video_fps=video_fps, width_px=width_px, animation=not no_3d
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
+    finally:
+        for lg in loggers:
+            lg.removeHandler(warn)
     import csv
 
     import numpy as np

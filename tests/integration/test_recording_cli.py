@@ -141,3 +141,15 @@ def test_clock_recovery_on_a_recording_writes_recovered_times(shard, tmp_path):
     assert got["mpjpe_mm"] == pytest.approx(ref["mpjpe_mm"], rel=1e-6)
     _, t, _, _ = read_trc(trc)
     assert np.all(np.diff(t) >= 0) and t[-1] > 0.2  # recovered clock times (0.33 s of capture), not ranks
+
+
+def test_unit_warnings_are_one_line_on_stderr(shard, tmp_path):
+    project = _export(shard, tmp_path / "rec", "--units", "mm")
+    cal = tmp_path / "rec" / "calibration.toml"
+    cal.write_text(cal.read_text().replace('units = "mm"\n', ""))
+    project.write_text(project.read_text().replace('calibration_units = "mm"\n', ""))
+    res = _reconstruct(project, "--method", "pseudo")  # detected: one line says so
+    assert res.exit_code == 0 and res.stderr.count("warning: ") == 1 and "read as mm" in res.stderr
+    res = _reconstruct(project, "--method", "pseudo", "--calibration-units", "m")  # the mistake, named
+    assert res.exit_code == 0 and res.stderr.count("warning: ") == 1
+    assert "km from the origin" in res.stderr and "--calibration-units mm" in res.stderr
