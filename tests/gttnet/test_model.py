@@ -88,6 +88,24 @@ def test_slot_rank_input():
     assert out.shape == (6, 2, 3)
 
 
+@pytest.mark.parametrize("slot_rank", [False, True])
+def test_continuous_conv_matches_direct_formulation(slot_rank):
+    """The channel-major forward (slot MLP applied per image) equals the direct one, values and gradients."""
+    gen = torch.Generator().manual_seed(5)
+    conv = ContinuousConv(7, 3, n_slots=5, hidden=6, slot_rank=slot_rank).double()
+    x = torch.randn(11, 7, 3, generator=gen, dtype=torch.float64, requires_grad=True)
+    index, mask = patch_index(_random_nbr(11, 4, gen, pad_rows=3))
+    out, slots = conv(x, index, mask)
+    ref_out, ref_slots = conv._forward_reference(x, index, mask)
+    torch.testing.assert_close(out, ref_out)
+    torch.testing.assert_close(slots, ref_slots)
+    w = torch.randn(ref_slots.shape, generator=gen, dtype=torch.float64)
+    grads = torch.autograd.grad((out**2).sum() + (slots * w).sum(), [x, *conv.parameters()])
+    ref = torch.autograd.grad((ref_out**2).sum() + (ref_slots * w).sum(), [x, *conv.parameters()])
+    for g, r in zip(grads, ref, strict=True):
+        torch.testing.assert_close(g, r)
+
+
 def test_point_set_norm_invariances():
     norm = PointSetNorm(4).double()
     x = torch.randn(6, 4, 3, dtype=torch.float64)
