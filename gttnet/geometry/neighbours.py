@@ -9,7 +9,7 @@ import numpy as np
 
 from gttnet.errors import SequencingError
 
-__all__ = ["neighbourhoods", "chain_affinity", "temporal_chain_affinity"]
+__all__ = ["neighbourhoods", "chain_affinity", "temporal_chain_affinity", "temporal_interpolation_affinity"]
 
 log = logging.getLogger(__name__)
 
@@ -216,3 +216,64 @@ def temporal_chain_affinity(timestamp_s: np.ndarray, *, cam_id: np.ndarray | Non
             if nxt.size:
                 A[order[q], order[q + 1 + nxt[0]]] = 1.0
     return np.maximum(A, A.T)
+
+
+def temporal_interpolation_affinity(timestamp_s: np.ndarray, cam_id: np.ndarray) -> np.ndarray:
+    """Each image as the linear interpolation of its time neighbours from other cameras (full sequencing).
+
+    Row n links image n to ``p``, the latest image of another camera taken at or before ``t_n``, and
+    ``q``, the earliest image of another camera taken after ``t_n``, with the weights that interpolate
+    ``t_n`` between them: ``A[n, p] = (t_q - t_n) / (t_q - t_p)``, ``A[n, q] = (t_n - t_p) / (t_q - t_p)``.
+    An image taken at the same time as another camera's (``t_p = t_n``) links to that one with weight
+    1; at the ends of the capture the single neighbour gets weight 1. Under full sequencing this is the
+    timing the solver is given, written as an affinity (the continuous ground-truth affinity when the
+    timestamps are exact).
+
+    Args:
+        timestamp_s: Capture times, seconds, shape ``(N,)``.
+        cam_id: Camera of each image, shape ``(N,)``.
+
+    Returns:
+        Row-stochastic affinity, shape ``(N, N)`` float64, zero diagonal (rows of a one-camera capture
+        are zero).
+
+    Example:
+        >>> temporal_interpolation_affinity(np.array([0.0, 0.1, 0.4]), np.array([0, 1, 0])).tolist()
+        [[0.0, 1.0, 0.0], [0.75, 0.0, 0.25], [0.0, 1.0, 0.0]]
+    """
+    t = np.asarray(timestamp_s, dtype=np.float64)
+    cam = np.asarray(cam_id)
+    if t.ndim != 1 or cam.shape != t.shape:
+        raise ValueError(f"timestamp_s and cam_id must both have shape (N,), got {t.shape} and {cam.shape}")
+    n = t.shape[0]
+    prev_t = np.full(n, -np.inf)
+    prev_i = np.full(n, -1, dtype=np.int64)
+    next_t = np.full(n, np.inf)
+    next_i = np.full(n, -1, dtype=np.int64)
+    for c in np.unique(cam):
+        members = np.flatnonzero(cam == c)
+        members = members[np.argsort(t[members], kind="stable")]
+        tc = t[members]
+        other = cam != c
+        lo = np.searchsorted(tc, t, side="right") - 1  # latest of camera c at or before t_n
+        hi = np.searchsorted(tc, t, side="right")  # earliest of camera c after t_n
+        has = other & (lo >= 0)
+        cand = np.where(has, tc[np.clip(lo, 0, None)], -np.inf)
+        better = has & (cand > prev_t)
+        prev_t[better], prev_i[better] = cand[better], members[lo[better]]
+        has = other & (hi < tc.shape[0])
+        cand = np.where(has, tc[np.clip(hi, None, tc.shape[0] - 1)], np.inf)
+        better = has & (cand < next_t)
+        next_t[better], next_i[better] = cand[better], members[hi[better]]
+    A = np.zeros((n, n))
+    rows = np.arange(n)
+    both = (prev_i >= 0) & (next_i >= 0) & (prev_t < t)
+    w = np.zeros(n)
+    w[both] = (t[both] - prev_t[both]) / (next_t[both] - prev_t[both])
+    A[rows[both], prev_i[both]] = 1.0 - w[both]
+    A[rows[both], next_i[both]] = w[both]
+    only_prev = (prev_i >= 0) & ~both
+    A[rows[only_prev], prev_i[only_prev]] = 1.0
+    only_next = (next_i >= 0) & (prev_i < 0)
+    A[rows[only_next], next_i[only_next]] = 1.0
+    return A

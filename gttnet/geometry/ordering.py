@@ -9,7 +9,7 @@ import scipy.linalg
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["graph_components", "spectral_order"]
+__all__ = ["graph_components", "spectral_order", "stream_consistent_order", "timestamp_order"]
 
 log = logging.getLogger(__name__)
 
@@ -137,3 +137,66 @@ def spectral_order(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
     rank = np.empty(n, dtype=np.int64)
     rank[seq] = np.arange(n)
     return rank
+
+
+def timestamp_order(timestamp_s: np.ndarray) -> np.ndarray:
+    """Rank of each image by capture time (ties by image index): the order under full sequencing.
+
+    Args:
+        timestamp_s: Capture times, seconds, shape ``(N,)``.
+
+    Returns:
+        Rank of each image (0 = first), shape ``(N,)`` int64.
+
+    Example:
+        >>> timestamp_order(np.array([0.2, 0.0, 0.1, 0.0])).tolist()
+        [3, 0, 2, 1]
+    """
+    t = np.asarray(timestamp_s, dtype=np.float64)
+    if t.ndim != 1:
+        raise ValueError(f"timestamp_s must have shape (N,), got {t.shape}")
+    rank = np.empty(t.shape[0], dtype=np.int64)
+    rank[np.argsort(t, kind="stable")] = np.arange(t.shape[0])
+    return rank
+
+
+def stream_consistent_order(rank: np.ndarray, cam_id: np.ndarray, stream_index: np.ndarray) -> np.ndarray:
+    """Make a recovered order agree with every stream's own order (partial sequencing).
+
+    The direction of ``rank`` (a spectral order has none) is first chosen so that more consecutive
+    images of each stream run forward than backward. Then each stream keeps the set of positions
+    ``rank`` gave its images, reassigned to them in stream order: images of different streams
+    interleave as recovered, and no stream's order is ever contradicted.
+
+    Args:
+        rank: Recovered rank of each image, a permutation of ``0..N-1``, shape ``(N,)``.
+        cam_id: Camera (= stream) of each image, shape ``(N,)``.
+        stream_index: Index within its stream, shape ``(N,)``.
+
+    Returns:
+        Rank of each image, shape ``(N,)`` int64, increasing along ``stream_index`` within every stream.
+
+    Example:
+        >>> stream_consistent_order(np.array([0, 3, 1, 2]), np.array([0, 0, 1, 1]), np.array([1, 0, 0, 1])).tolist()
+        [3, 0, 1, 2]
+    """
+    r = np.asarray(rank, dtype=np.int64)
+    cam = np.asarray(cam_id)
+    si = np.asarray(stream_index)
+    n = r.shape[0]
+    if cam.shape != (n,) or si.shape != (n,):
+        raise ValueError(
+            f"rank, cam_id and stream_index must have shape (N,), got {r.shape}, {cam.shape}, {si.shape}"
+        )
+    if not np.array_equal(np.sort(r), np.arange(n)):
+        raise ValueError("rank must be a permutation of 0..N-1")
+    by_stream = np.lexsort((si, cam))
+    same = cam[by_stream][1:] == cam[by_stream][:-1]
+    steps = np.sign(np.diff(r[by_stream]))[same]
+    if steps.sum() < 0:
+        r = n - 1 - r
+    out = np.empty(n, dtype=np.int64)
+    for c in np.unique(cam):
+        members = by_stream[cam[by_stream] == c]
+        out[members] = np.sort(r[members])
+    return out

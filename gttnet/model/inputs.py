@@ -22,7 +22,10 @@ class SequenceInput:
         centers: Camera centre per image in world, metres, shape ``(N, 3)``.
         rays: Unit viewing rays in world, shape ``(N, J, 3)``, zero where missing.
         visible: Observed joints, shape ``(N, J)`` bool.
-        chain: Within-stream chain affinity, shape ``(N, N)``, under ``partial`` sequencing; else None.
+        chain: The timing given, as an affinity of shape ``(N, N)``: under ``partial`` the within-stream
+            chain (added to the learned affinity), under ``full`` the interpolation of each image between
+            its time neighbours of other cameras (used by the solver instead of the learned affinity);
+            None under ``none``.
         sequencing: ``"none"``, ``"partial"`` or ``"full"``.
         domain: Skeleton topology name (selects the PointNet decoder).
     """
@@ -105,7 +108,7 @@ def prepare_inputs(
     """Pseudo-triangulate, build neighbourhoods and pack an :class:`Observations` for the network.
 
     The neighbourhood respects the sequencing condition (under ``none`` no stream order is used); the
-    within-stream chain is built only under ``partial``.
+    chain holds the timing that condition gives (see :class:`SequenceInput`).
 
     Args:
         obs: Solver inputs for one sequencing condition.
@@ -118,7 +121,7 @@ def prepare_inputs(
     Returns:
         A :class:`SequenceInput` on the CPU.
     """
-    from gttnet.geometry.neighbours import chain_affinity, neighbourhoods
+    from gttnet.geometry.neighbours import chain_affinity, neighbourhoods, temporal_interpolation_affinity
     from gttnet.geometry.triangulation import pseudo_triangulate
 
     if candidates not in ("auto", "dense", "kdtree"):
@@ -147,6 +150,8 @@ def prepare_inputs(
     chain = None
     if obs.sequencing == "partial":
         chain = torch.as_tensor(np.asarray(chain_affinity(obs.cam_id, obs.stream_index)), dtype=dtype)
+    elif obs.sequencing == "full":
+        chain = torch.as_tensor(temporal_interpolation_affinity(obs.timestamp_s, obs.cam_id), dtype=dtype)
     x_init = np.nan_to_num(np.asarray(pt.X_init, dtype=np.float64))
     return SequenceInput(
         x_init=torch.as_tensor(x_init, dtype=dtype),

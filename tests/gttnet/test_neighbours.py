@@ -9,7 +9,12 @@ from hypothesis import strategies as st
 
 from gttdata.capture.views import make_view
 from gttnet.errors import SequencingError
-from gttnet.geometry.neighbours import chain_affinity, neighbourhoods, temporal_chain_affinity
+from gttnet.geometry.neighbours import (
+    chain_affinity,
+    neighbourhoods,
+    temporal_chain_affinity,
+    temporal_interpolation_affinity,
+)
 from gttnet.geometry.triangulation import pseudo_triangulate
 
 INF = np.inf
@@ -123,3 +128,25 @@ def test_temporal_chain_matches_ground_truth_affinity(toy_sample):
     np.testing.assert_array_equal(A, toy_sample.affinity_binary())
     A_any = temporal_chain_affinity(toy_sample.timestamp_s)
     assert A_any.sum() == 2 * (toy_sample.n_images - 1)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 4), st.integers(2, 12), st.integers(0, 10_000))
+def test_temporal_interpolation_affinity_interpolates_time(n_cams, n, seed):
+    """Rows sum to one, link only other cameras, and reproduce each interior image's timestamp."""
+    rng = np.random.default_rng(seed)
+    cam = rng.integers(0, n_cams, size=n)
+    t = rng.permutation(n).astype(float) * 0.01 + rng.uniform(0, 1e-3)
+    A = temporal_interpolation_affinity(t, cam)
+    linked = A > 0
+    assert not (linked & (cam[:, None] == cam[None, :])).any()
+    has_other = np.array([(cam != c).any() for c in cam])
+    np.testing.assert_allclose(A.sum(1), has_other.astype(float))
+    other_t = [t[cam != cam[i]] for i in range(n)]
+    interior = np.array([o.size > 0 and o.min() < t[i] < o.max() for i, o in enumerate(other_t)])
+    np.testing.assert_allclose((A @ t)[interior], t[interior])
+    # The links are the nearest other-camera images in time on each side.
+    for i in np.flatnonzero(interior):
+        before = t[(cam != cam[i]) & (t < t[i])].max()
+        after = t[(cam != cam[i]) & (t > t[i])].min()
+        assert set(t[linked[i]]) == {before, after}

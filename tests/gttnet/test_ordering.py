@@ -4,9 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gttnet.evaluate.metrics import kendall_tau
-from gttnet.geometry.ordering import graph_components, spectral_order
+from gttnet.geometry.ordering import (
+    graph_components,
+    spectral_order,
+    stream_consistent_order,
+    timestamp_order,
+)
 
 
 def _chain(n: int, perm: np.ndarray) -> np.ndarray:
@@ -88,3 +95,36 @@ def test_sparse_fiedler_matches_dense_on_a_large_chain(monkeypatch):
     truth = np.empty(n, dtype=np.int64)
     truth[perm] = np.arange(n)
     assert sparse.tolist() == truth.tolist() or sparse.tolist() == (n - 1 - truth).tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 4), st.integers(1, 15), st.integers(0, 10_000))
+def test_stream_consistent_order_never_contradicts_a_stream(n_cams, n, seed):
+    rng = np.random.default_rng(seed)
+    cam = rng.integers(0, n_cams, size=n)
+    stream_index = rng.permutation(n)
+    out = stream_consistent_order(rng.permutation(n), cam, stream_index)
+    assert sorted(out.tolist()) == list(range(n))
+    for c in np.unique(cam):
+        members = np.flatnonzero(cam == c)
+        along = out[members[np.argsort(stream_index[members])]]
+        assert (np.diff(along) > 0).all()
+
+
+def test_stream_consistent_order_keeps_a_consistent_order_and_fixes_direction():
+    cam = np.array([0, 1, 0, 1, 0, 1])
+    stream_index = np.array([0, 0, 1, 1, 2, 2])
+    truth = np.arange(6)
+    np.testing.assert_array_equal(stream_consistent_order(truth, cam, stream_index), truth)
+    np.testing.assert_array_equal(stream_consistent_order(5 - truth, cam, stream_index), truth)
+    # One stream's images swapped: only that stream changes, back into stream order.
+    swapped = np.array([0, 1, 4, 3, 2, 5])
+    np.testing.assert_array_equal(stream_consistent_order(swapped, cam, stream_index), truth)
+    with pytest.raises(ValueError, match="permutation"):
+        stream_consistent_order(np.array([0, 0, 1]), np.zeros(3, int), np.arange(3))
+
+
+def test_timestamp_order_is_the_rank_in_time():
+    t = np.array([0.3, 0.1, 0.2, 0.1])
+    assert kendall_tau(timestamp_order(t), np.array([3, 0, 2, 1])) == 1.0
+    np.testing.assert_array_equal(timestamp_order(t), [3, 0, 2, 1])
