@@ -25,6 +25,7 @@ __all__ = [
     "prepare_item",
     "open_source",
     "ConcatSource",
+    "check_registered",
 ]
 
 log = logging.getLogger(__name__)
@@ -210,7 +211,43 @@ def _open_one(spec, split: str):
         if spec.root:
             args.append(f"output_dir={root}")
         gttdata_main(args, standalone_mode=False)
+    if spec.manifest is not None:
+        check_registered(root, spec.manifest)
     return ShardSource(root, split)
+
+
+_VERIFIED: set[tuple[str, str]] = set()
+
+
+def check_registered(root: str | Path, manifest: str | Path) -> None:
+    """Check that the shards under ``root`` are the dataset a registered manifest describes.
+
+    Args:
+        root: Dataset directory (with its own ``manifest.json``).
+        manifest: The registered manifest (e.g. ``manifests/default.json``).
+
+    Raises:
+        ValueError: One line naming the manifest and the first difference (recipe hash, or a shard's
+            presence, size or SHA-256).
+    """
+    from gttdata.manifest import load_manifest, verify_manifest
+
+    key = (str(Path(root).resolve()), Path(manifest).read_text() if Path(manifest).is_file() else "")
+    if key in _VERIFIED:  # the train and validation splits open the same shards: check them once
+        return
+    registered = load_manifest(manifest)
+    local = load_manifest(root)
+    if local.recipe_hash != registered.recipe_hash:
+        raise ValueError(
+            f"{root}: recipe_hash {local.recipe_hash} differs from {manifest} ({registered.recipe_hash}); "
+            "regenerate the shards with the registered recipe"
+        )
+    problems = verify_manifest(root, registered)
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ValueError(f"{root} does not match {manifest}: {problems[0]}{more}")
+    _VERIFIED.add(key)
+    log.info("shards under %s match %s", root, manifest)
 
 
 def open_source(data_spec, split: str, *, limit: str = "max_train") -> ConcatSource:

@@ -57,6 +57,9 @@ class SourceSpec:
         kind: ``"recipe"``: build every sample on the fly (deterministic per index, no disk);
             ``"shards"``: read shards under ``root``, generating them first when absent.
         root: Shard directory for ``kind: shards`` (default: the generate recipe's ``output_dir``).
+        manifest: For ``kind: shards``, the registered manifest the shards must match (e.g.
+            ``manifests/default.json``): the recipe hash and every shard's size and SHA-256 are checked
+            before training, so a run never trains on data other than the dataset it names.
         max_train: Use at most this many of its training samples (None: all).
         max_val: Use at most this many of its validation samples (None: all).
     """
@@ -65,12 +68,17 @@ class SourceSpec:
     overrides: list[str] = field(default_factory=list)
     kind: str = "recipe"
     root: str | None = None
+    manifest: str | None = None
     max_train: int | None = None
     max_val: int | None = 4
 
     def __post_init__(self) -> None:
         if self.kind not in ("recipe", "shards"):
             raise ValueError(f"kind must be 'recipe' or 'shards', got {self.kind!r}")
+        if self.manifest is not None and self.kind != "shards":
+            raise ValueError(
+                f"manifest {self.manifest!r} applies to kind 'shards' only, got kind {self.kind!r}"
+            )
 
 
 @dataclass

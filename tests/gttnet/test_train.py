@@ -273,3 +273,33 @@ def test_cuda_training_smoke(tmp_path):
     data["train"].update({"device": "cuda", "amp": True})
     res = train(parse_train_recipe(data), out=tmp_path / "cuda", progress=False)
     assert res.finished and all(np.isfinite(h["loss"]) for h in res.state.history)
+
+
+def test_shard_source_is_checked_against_its_registered_manifest(tmp_path):
+    """kind: shards with a manifest trains only on the registered dataset: a changed shard is refused."""
+    import json
+
+    from gttdata.cli import main as gttdata_main
+    from gttnet.data import open_source
+
+    root = tmp_path / "tiny"
+    gttdata_main(["generate", str(REPO / "recipes/gttdata/tiny.yaml"), "--out", str(root), "--no-progress"],
+                 standalone_mode=False)  # fmt: skip
+    registered = tmp_path / "tiny.json"
+    registered.write_text((root / "manifest.json").read_text())
+    source = {"generate": str(REPO / "recipes/gttdata/tiny.yaml"), "kind": "shards", "root": str(root),
+              "manifest": str(registered)}  # fmt: skip
+    spec = parse_train_recipe(_recipe(tmp_path, data__sources=[source])).data
+    assert len(open_source(spec, "train")) > 0
+    changed = json.loads(registered.read_text())
+    changed["shards"][0]["sha256"] = "0" * 64
+    registered.write_text(json.dumps(changed))
+    with pytest.raises(ValueError, match=r"does not match .*tiny\.json: .*") as info:
+        open_source(spec, "train")
+    assert "\n" not in str(info.value)
+    changed["recipe_hash"] = "f" * len(changed["recipe_hash"])
+    registered.write_text(json.dumps(changed))
+    with pytest.raises(ValueError, match="recipe_hash .* differs from"):
+        open_source(spec, "train")
+    with pytest.raises(RecipeError, match="applies to kind 'shards' only"):
+        parse_train_recipe(_recipe(tmp_path, data__sources=[{**source, "kind": "recipe"}]))
