@@ -35,6 +35,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=int, default=15)
     p.add_argument("--console-scripts", action="store_true", help="Also time gttnet/gttdata found on PATH.")
+    p.add_argument("--torch-runs", type=int, default=3, help="Runs of 'import torch' (for scale; slow).")
     args = p.parse_args()
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
     py = sys.executable
@@ -43,7 +44,6 @@ def main() -> None:
         "gttnet --help": [py, "-m", "gttnet", "--help"],
         "gttdata --help": [py, "-m", "gttdata", "--help"],
         "gttnet reconstruct --help": [py, "-m", "gttnet", "reconstruct", "--help"],
-        "import torch (for scale)": [py, "-c", "import torch"],
     }
     if args.console_scripts:
         for name in ("gttnet", "gttdata"):
@@ -54,8 +54,11 @@ def main() -> None:
     for name, cmd in cases.items():
         _time(cmd, 1, env)  # warm the file cache
         rows.append((name, _time(cmd, args.runs, env)))
+    if args.torch_runs > 0:
+        rows.append(("import torch (for scale)", _time([py, "-c", "import torch"], args.torch_runs, env)))
     base = statistics.median(rows[0][1])
-    print(f"| command | median s | min..max s | vs bare python |  ({args.runs} runs each)")
+    print(f"{args.runs} runs each ({args.torch_runs} of import torch)")
+    print("| command | median s | min..max s | vs bare python |")
     print("|---|---|---|---|")
     for name, t in rows:
         med = statistics.median(t)

@@ -15,9 +15,9 @@ Placing images in time (:func:`approximate_times`):
   the recording's first :data:`SYNC_PREFIX_IMAGES` images, and every image is placed by those clocks
   (:func:`synced_times`); clock recovery over the whole recording searches offsets over its whole
   length and grows faster than linearly (measured 1.1 s at 1,440 images, 7 s at 7,200, 48 s at
-  24,000), while offsets and rates found on a minute carry over: a clock-rate error of 100 ppm moves
-  an image by 60 ms (2 frames at 30 Hz) after 10 minutes, well inside a window's overlap. If clock
-  recovery fails, images are placed at their stream's elapsed fraction, ``(rank in stream + 0.5) /
+  24,000), while offsets found on the first 20 s (2,400 images of 4 cameras at 30 Hz) carry over: a
+  clock-rate error of 100 ppm, not estimated on 20 s, moves an image by 60 ms (2 frames at 30 Hz)
+  after 10 minutes, well inside a window's overlap. If clock recovery fails, images are placed at their stream's elapsed fraction, ``(rank in stream + 0.5) /
   images in stream`` (:func:`approximate_times`), which assumes streams spanning the same recording at
   the same rate.
 
@@ -40,7 +40,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -68,7 +68,7 @@ AUTO_MIN_IMAGES = 2000
 _PER_CAMERA = 80
 
 #: Images (all cameras together) at the start of a partial recording on which clocks are recovered.
-SYNC_PREFIX_IMAGES = 7200
+SYNC_PREFIX_IMAGES = 2400
 
 
 @dataclass(frozen=True)
@@ -194,16 +194,13 @@ def subset_observations(obs: Observations, idx: np.ndarray) -> tuple[Observation
         rows = idx[np.argsort(obs.timestamp_s[idx], kind="stable")]
     else:
         rows = np.sort(idx)
-    sub = replace(
-        obs,
-        cam_id=obs.cam_id[rows],
-        K=obs.K[rows],
-        cam_from_world=obs.cam_from_world[rows],
-        keypoints_px=obs.keypoints_px[rows],
-        visible=obs.visible[rows],
-        stream_index=None if obs.stream_index is None else obs.stream_index[rows],
-        timestamp_s=None if obs.timestamp_s is None else obs.timestamp_s[rows],
-    )
+    n = obs.n_images
+    per_image = {}
+    for f in fields(obs):
+        value = getattr(obs, f.name)
+        if f.name != "image_size" and isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+            per_image[f.name] = value[rows]
+    sub = replace(obs, **per_image)
     return sub, rows
 
 
@@ -304,7 +301,12 @@ def reconstruct_windowed(
     done = 0
     for w in range(len(plan)):
         sub, rows = subset_observations(obs, plan.window(w))
-        rec = spec.fn(sub, **options)
+        # Per-image options (e.g. frame_times_s) follow the window's images.
+        opts = {
+            k: v[rows] if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == n else v
+            for k, v in options.items()
+        }
+        rec = spec.fn(sub, **opts)
         win = plan.window(w)
         srt = np.argsort(win)
         weight = plan.weights(w)[srt[np.searchsorted(win[srt], rows)]]

@@ -191,7 +191,9 @@ def _scatter(cand: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
 
 
 @register_method("dloe", requires="none", summary="DLOE alternating W/D/X optimisation (Xu & Dunn 2019)")
-def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrides) -> Reconstruction:
+def reconstruct_dloe(
+    obs: Observations, *, xstep_method: str = "auto", candidates: str = "dense", **overrides
+) -> Reconstruction:
     """DLOE: alternate the W-step, D-step and X-step from the pseudo-triangulation ``X_init``.
 
     Each round: embed the current X in 1-D (:func:`mds_embedding`), fit ``W_var`` row by row
@@ -205,6 +207,10 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
     Args:
         obs: Observations (any sequencing).
         xstep_method: Solver of the X-step (passed to ``solve_structure``).
+        candidates: Pseudo-triangulation under ``none`` sequencing: ``"dense"`` (all pairs, the reference's
+            search and the default), ``"kdtree"`` (:mod:`gttnet.geometry.candidates`: X_init, W-step
+            candidates and convergences from the candidate pairs only) or ``"auto"`` (k-d tree above
+            600 images).
         **overrides: Fields of :class:`DLOEParams`.
 
     Returns:
@@ -215,19 +221,30 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
     unknown = sorted(set(overrides) - set(DLOEParams.__dataclass_fields__))
     if unknown:
         raise ValueError(
-            f"method 'dloe' has no option {unknown[0]!r}; options: xstep_method, "
+            f"method 'dloe' has no option {unknown[0]!r}; options: xstep_method, candidates, "
             + ", ".join(DLOEParams.__dataclass_fields__)
         )
     params = DLOEParams(**overrides)
     n = obs.n_images
     centers, rays, vis = obs.centers(), obs.rays(), obs.visible
-    pt = pseudo_triangulate(centers, rays, vis, obs.cam_id)
-    cand = candidate_neighbours(obs, pt.cost, pt.order, params.n_candidates)
+    from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
+
+    if use_candidate_search(obs.sequencing, n, candidates):
+        cp = candidate_pseudo_triangulate(centers, rays, vis, obs.cam_id)
+        cand = cp.neighbours(params.n_candidates)
+        conv = np.full((n, n), np.nan)  # NaN (no triangulation support) outside the candidate pairs
+        used = cp.partners >= 0
+        conv[np.nonzero(used)[0], cp.partners[used]] = cp.convergence[used]
+        x_init = cp.X_init
+    else:
+        pt = pseudo_triangulate(centers, rays, vis, obs.cam_id)
+        cand = candidate_neighbours(obs, pt.cost, pt.order, params.n_candidates)
+        conv, x_init = pt.convergence, pt.X_init
     use_prior = obs.sequencing != "none" and params.w_prior > 0
     W_const = (
         chain_affinity(obs.cam_id, obs.stream_index, row_normalise=True) if use_prior else np.zeros((n, n))
     )
-    X = pt.X_init
+    X = x_init
     d = np.ones(n)
     w = None
     deltas: list[float] = []
@@ -236,7 +253,7 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
         w = w_step(
             Xi,
             cand,
-            pt.convergence,
+            conv,
             mds_embedding(Xi),
             W_const,
             d,
@@ -247,7 +264,7 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
         W = _scatter(cand, w, n)
         if use_prior:
             W = (1.0 - params.w_prior) * W + params.w_prior * W_const
-        d = d_step(Xi, W, pt.convergence, params)
+        d = d_step(Xi, W, conv, params)
         A = ((1.0 - params.d_const) * d + params.d_const)[:, None] * W
         # X_init as a vanishing ridge keeps the solve unique where a joint is unseen in a linked component.
         X_new = solve_structure(
@@ -258,7 +275,7 @@ def reconstruct_dloe(obs: Observations, *, xstep_method: str = "auto", **overrid
             lambda1=params.lambda1,
             lambda2=params.lambda2,
             method=xstep_method,
-            x_prior=pt.X_init,
+            x_prior=x_init,
         )
         X_new = X_new.detach().cpu().numpy() if isinstance(X_new, torch.Tensor) else np.asarray(X_new)
         deltas.append(float(np.linalg.norm((X_new - X) * _INCH_PER_M) / (n * obs.n_joints)))

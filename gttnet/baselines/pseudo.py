@@ -40,7 +40,9 @@ def top_q_affinity(cost: np.ndarray, *, q: int = 2) -> np.ndarray:
 
 
 @register_method("pseudo", requires="none", summary="pseudo-triangulation (X_init); no smoothness prior")
-def reconstruct_pseudo(obs: Observations, *, q: int = 2, min_angle_deg: float = 0.0) -> Reconstruction:
+def reconstruct_pseudo(
+    obs: Observations, *, q: int = 2, min_angle_deg: float = 0.0, candidates: str = "auto"
+) -> Reconstruction:
     """Pseudo-triangulation: each visible joint at its closest point to the best other-camera ray.
 
     The affinity links each image to its ``q`` lowest-cost pseudo-triangulation partners (a geometry-only
@@ -50,9 +52,23 @@ def reconstruct_pseudo(obs: Observations, *, q: int = 2, min_angle_deg: float = 
         obs: Observations (any sequencing).
         q: Partners per image in the returned affinity.
         min_angle_deg: Demote partners whose rays are within this angle (see ``pseudo_triangulate``).
+        candidates: Partner search under ``none`` sequencing: ``"dense"`` (all pairs), ``"kdtree"``
+            (:func:`~gttnet.geometry.candidates.candidate_pseudo_triangulate`) or ``"auto"``.
 
     Returns:
         Reconstruction holding ``X_init``.
     """
+    from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
+
+    if use_candidate_search(obs.sequencing, obs.n_images, candidates):
+        cp = candidate_pseudo_triangulate(
+            obs.centers(), obs.rays(), obs.visible, obs.cam_id, min_angle_deg=min_angle_deg
+        )
+        n = obs.n_images
+        A = np.zeros((n, n))
+        nb = cp.neighbours(q)
+        rows, cols = np.nonzero(nb >= 0)
+        A[rows, nb[rows, cols]] = 1.0
+        return Reconstruction(points3d=cp.X_init, affinity=np.maximum(A, A.T))
     pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id, min_angle_deg=min_angle_deg)
     return Reconstruction(points3d=pt.X_init, affinity=top_q_affinity(pt.cost, q=q))

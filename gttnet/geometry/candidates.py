@@ -30,7 +30,9 @@ import numpy as np
 from gttnet.errors import GttNetError
 
 __all__ = [
+    "DENSE_MAX_IMAGES",
     "CandidatePseudoTriangulation",
+    "use_candidate_search",
     "candidate_partners",
     "candidate_pseudo_triangulate",
     "epipolar_descriptors",
@@ -41,6 +43,10 @@ log = logging.getLogger(__name__)
 
 #: Rays whose squared sine of the angle between them is below this are treated as parallel (as dense).
 _PARALLEL_EPS = 1e-12
+
+#: Under ``none`` sequencing, ``candidates="auto"`` searches all pairs up to this many images and uses the
+#: k-d tree above it (measured at 1,440 images: same GTT-Net accuracy, ~10x less pseudo-triangulation time).
+DENSE_MAX_IMAGES = 600
 
 #: Image pairs scored at once by :func:`pair_costs` (memory ~ 300 * chunk * J bytes).
 _PAIR_CHUNK = 4096
@@ -76,6 +82,24 @@ class CandidatePseudoTriangulation:
         take = self.partners[:, :kk]
         out[:, :kk] = np.where(np.isfinite(self.cost[:, :kk]), take, -1)
         return out
+
+
+def use_candidate_search(sequencing: str, n_images: int, candidates: str) -> bool:
+    """Whether a method's ``candidates`` option picks the k-d tree search for this capture.
+
+    Args:
+        sequencing: ``"none"``, ``"partial"`` or ``"full"`` (only ``none`` ranks by cost alone).
+        n_images: Images N.
+        candidates: ``"dense"``, ``"kdtree"`` or ``"auto"`` (k-d tree above :data:`DENSE_MAX_IMAGES`).
+
+    Raises:
+        ValueError: For another ``candidates`` value.
+    """
+    if candidates not in ("auto", "dense", "kdtree"):
+        raise ValueError(f"candidates must be 'auto', 'dense' or 'kdtree', got {candidates!r}")
+    return sequencing == "none" and (
+        candidates == "kdtree" or (candidates == "auto" and n_images > DENSE_MAX_IMAGES)
+    )
 
 
 def _unit_rays(rays: np.ndarray, visible: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ import torch
 
 from gttdata.capture.views import Observations
 
-__all__ = ["DENSE_MAX_IMAGES", "SequenceInput", "prepare_inputs", "random_rotation"]
+__all__ = ["SequenceInput", "prepare_inputs", "random_rotation"]
 
 
 @dataclass(frozen=True)
@@ -97,11 +97,6 @@ def random_rotation(rng: np.random.Generator, *, mode: str = "so3") -> np.ndarra
     )
 
 
-#: Under ``none`` sequencing, captures with more images than this find neighbours with the k-d tree
-#: candidate search (:mod:`gttnet.geometry.candidates`) instead of the dense pairwise search.
-DENSE_MAX_IMAGES = 600
-
-
 def prepare_inputs(
     obs: Observations, *, k: int, dtype: torch.dtype = torch.float32, candidates: str = "auto"
 ) -> SequenceInput:
@@ -116,7 +111,7 @@ def prepare_inputs(
         dtype: Floating dtype of the tensors.
         candidates: Neighbour search under ``none`` sequencing: ``"dense"`` (all pairs), ``"kdtree"``
             (epipolar-descriptor candidates, :func:`~gttnet.geometry.candidates.candidate_pseudo_triangulate`)
-            or ``"auto"`` (k-d tree above :data:`DENSE_MAX_IMAGES` images). Other conditions use dense.
+            or ``"auto"`` (k-d tree above :data:`~gttnet.geometry.candidates.DENSE_MAX_IMAGES` images). Other conditions use dense.
 
     Returns:
         A :class:`SequenceInput` on the CPU.
@@ -124,16 +119,11 @@ def prepare_inputs(
     from gttnet.geometry.neighbours import chain_affinity, neighbourhoods, temporal_interpolation_affinity
     from gttnet.geometry.triangulation import pseudo_triangulate
 
-    if candidates not in ("auto", "dense", "kdtree"):
-        raise ValueError(f"candidates must be 'auto', 'dense' or 'kdtree', got {candidates!r}")
     centers = obs.centers()
     rays = obs.rays()
-    use_tree = obs.sequencing == "none" and (
-        candidates == "kdtree" or (candidates == "auto" and obs.n_images > DENSE_MAX_IMAGES)
-    )
-    if use_tree:
-        from gttnet.geometry.candidates import candidate_pseudo_triangulate
+    from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
 
+    if use_candidate_search(obs.sequencing, obs.n_images, candidates):
         pt = candidate_pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
         nbr = pt.neighbours(k)
     else:

@@ -102,3 +102,19 @@ def test_prepare_inputs_kdtree_neighbours(scene_factory):
     assert np.all(obs.cam_id[nbr] != obs.cam_id[:, None])
     with pytest.raises(ValueError, match="candidates"):
         prepare_inputs(obs, k=6, candidates="bogus")
+
+
+@pytest.mark.parametrize("method", ["pseudo", "dloe"])
+def test_methods_take_the_kdtree_search(scene_factory, method):
+    from gttnet.baselines import reconstruct
+    from gttnet.evaluate.metrics import mpjpe_mm
+
+    sample = scene_factory(n_cameras=4, n_joints=8, frames_per_camera=30, sigma_px=1.0, missing=0.1, seed=8)
+    obs, gt = make_view(sample, "none")
+    dense = reconstruct(obs, method, candidates="dense")
+    tree = reconstruct(obs, method, candidates="kdtree")
+    assert tree.points3d.shape == dense.points3d.shape and np.all(np.isfinite(tree.points3d))
+    e_dense, e_tree = mpjpe_mm(dense.points3d, gt.points3d), mpjpe_mm(tree.points3d, gt.points3d)
+    assert e_tree < 1.2 * e_dense + 1.0
+    with pytest.raises(ValueError, match="candidates"):
+        reconstruct(obs, method, candidates="bogus")
