@@ -71,6 +71,18 @@ def _check_subjects(out: str) -> None:
     assert len(d["mpjpe_mm_per_subject"]) == 2
 
 
+def _check_sync(out: str) -> None:
+    assert "-> runs/clocks.json" in out and "offset std ms" in out, out
+    assert re.search(r"offset error vs the file's true times, frames: ([+-]0\.[0-2]\d*(, )?){3}$", out, re.M), out
+    assert json.loads(Path("runs/clocks.json").read_text())["format"] == "gtt-clocks/1"
+
+
+def _check_reconstruct_auto_sync(out: str) -> None:
+    d = _json(out)
+    assert d["method"] == "sync" and d["requested_method"] == "auto" and len(d["clock_offsets_s"]) == 3, d
+    assert 0 < d["mpjpe_mm"] < 50 and d["order_kendall_tau"] > 0.9, d
+
+
 def _check_inspect(out: str) -> None:
     assert re.search(r"^dataset\s+\S+", out, re.M) and re.search(r"^total\s+\d+\s+\d+", out, re.M), out
     assert "{" not in out and "PosixPath" not in out
@@ -160,6 +172,11 @@ CHECKS: dict[str, Check] = {
     "gttnet reconstruct --calibration runs/recording/calibration.toml": (
         None,
         lambda out: "-> runs/recording/result.csv" in out or pytest.fail(out),
+    ),
+    "gttnet sync data/gttdata/tiny/test/shard-00000.h5": (lambda a: a, _check_sync),
+    "gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sequencing partial": (
+        lambda a: a,
+        _check_reconstruct_auto_sync,
     ),
     "gttnet render runs/recording/result.h5": (
         None,
