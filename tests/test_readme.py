@@ -73,7 +73,9 @@ def _check_subjects(out: str) -> None:
 
 def _check_sync(out: str) -> None:
     assert "-> runs/clocks.json" in out and "offset std ms" in out, out
-    assert re.search(r"offset error vs the file's true times, frames: ([+-]0\.[0-2]\d*(, )?){3}$", out, re.M), out
+    assert re.search(
+        r"offset error vs the file's true times, frames: ([+-]0\.[0-2]\d*(, )?){3}$", out, re.M
+    ), out
     assert json.loads(Path("runs/clocks.json").read_text())["format"] == "gtt-clocks/1"
 
 
