@@ -144,8 +144,9 @@ def sync_cmd(
 ):
     """Recover each camera's clock (offset, rate, drift, uncertainty) of INPUT from its 2-D skeletons.
 
-    INPUT needs each camera's frames in order (a shard, or a .mat/.json with stream order). Timestamps in
-    INPUT are never read. The clocks are written to --out and printed: frame k of camera c was taken at
+    INPUT needs each camera's frames in order: a shard, a .mat/.json with stream order, or a recording's
+    project file (.toml/.yaml, whose per-camera timestamp files or rates give each camera's own clock).
+    Timestamps on a shared clock are never read. The clocks are written to --out and printed: frame k of camera c was taken at
     offset_s + (1 + drift_ppm 1e-6) k / rate_hz (or its --frame-times time instead of k / rate_hz).
 
     \b
@@ -162,13 +163,21 @@ def sync_cmd(
     out = Path(out_path)
     if out.exists() and not overwrite:
         raise click.ClickException(f"{out}: exists; pass --overwrite to replace it")
-    try:
-        loaded = load_input(
-            input_path, fmt=fmt, sequencing="partial", sample=sample, variant=variant, units=units
-        )
-    except ValueError as exc:
-        raise click.ClickException(str(exc)) from exc
-    obs = loaded.observations
+    names = None
+    gt = None
+    if Path(input_path).suffix.lower() in (".toml", ".yaml", ".yml"):  # a recording's project file
+        from gttdata.recording import Recording, load_project
+
+        view = Recording.load(load_project(input_path)).view("partial", weights=False)
+        obs, names = view.observations, list(view.camera_names)
+    else:
+        try:
+            loaded = load_input(
+                input_path, fmt=fmt, sequencing="partial", sample=sample, variant=variant, units=units
+            )
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from exc
+        obs, gt = loaded.observations, loaded.ground_truth
     tau = None
     if frame_times is not None:
         tau = read_frame_times(frame_times, obs.cam_id, obs.stream_index)
@@ -183,7 +192,9 @@ def sync_cmd(
         "clocks_path": str(out),
         "cameras": clocks.to_dict()["cameras"],
     }
-    gt = loaded.ground_truth
+    if names is not None:  # a recording: camera ids are positions in its camera list
+        for row in report["cameras"]:
+            row["name"] = names[row["camera"]]
     if gt is not None:  # evaluation only, after the estimate: the file happens to hold the true times
         err = clock_times(obs, clocks, frame_times_s=tau) - gt.timestamp_s
         err -= np.median(err)

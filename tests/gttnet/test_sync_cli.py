@@ -93,3 +93,21 @@ def test_reconstruct_auto_runs_sync_on_partial_input(tmp_path):
     offs = rep["clock_offsets_s"]
     np.testing.assert_allclose([offs["0"], offs["1"], offs["2"]], [0.0, 1.3, 0.4], atol=0.1 / 30)
     assert rep["order_kendall_tau"] > 0.99
+
+
+def test_sync_reads_a_recordings_project_file(tmp_path, shard):
+    from gttdata.cli import main as gttdata_main
+
+    res = CliRunner().invoke(gttdata_main, ["export", str(shard), "--out", str(tmp_path / "rec")])
+    assert res.exit_code == 0, res.output
+    r = CliRunner().invoke(
+        main, ["sync", str(tmp_path / "rec" / "project.toml"), "--out", str(tmp_path / "c.json"), "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output.strip().splitlines()[-1])
+    assert [c["name"] for c in rep["cameras"]] == ["cam_0", "cam_1", "cam_2"]
+    ref = CliRunner().invoke(
+        main, ["sync", str(shard), "--fps", "25,30,60", "--out", str(tmp_path / "d.json"), "--json"]
+    )
+    want = [c["offset_s"] for c in json.loads(ref.output)["cameras"]]
+    np.testing.assert_allclose([c["offset_s"] for c in rep["cameras"]], want, atol=0.05 / 60)
