@@ -152,7 +152,7 @@ def sync_cmd(
     \b
     Examples:
       gttnet sync data/gttdata/default/test/shard-00000.h5 --sample 0 --out runs/clocks.json --json
-      gttnet sync capture.json --fps 25,30,60 --frame-times pts.csv --out clocks.json
+      gttnet sync runs/recording/project.toml --out runs/recording/clocks.json --overwrite --json
     """
     import numpy as np
 
