@@ -1,4 +1,6 @@
-"""Benchmark of clock recovery: `sync` (recover clocks, then HPF) against HPF given the true timestamps and
+"""Benchmark of clock recovery against known and ignored timestamps.
+
+Benchmark of clock recovery: `sync` (recover clocks, then HPF) against HPF given the true timestamps and
 DLOE on the same partial captures, in the same run.
 
 Run (the README's table, "Synchronizing cameras after the fact"):

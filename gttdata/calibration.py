@@ -245,7 +245,9 @@ def read_easymocap(
 def load_calibration(
     path: str | Path, *, units: str | None = None, warn: bool = True
 ) -> tuple[CameraRig, str]:
-    """Read a calibration by its name: a ``.toml`` file, an ``intri.yml`` (its ``extri.yml`` next to it)
+    """Read a calibration by its name.
+
+    ``path`` is a ``.toml`` file, an ``intri.yml`` (its ``extri.yml`` next to it)
     or a folder holding ``intri.yml`` and ``extri.yml``. Logs :func:`check_rig`'s warning when ``warn``.
 
     Returns:
@@ -271,8 +273,11 @@ def load_calibration(
 
 
 def save_calibration(rig: CameraRig, path: str | Path, *, units: str = "m") -> Path:
-    """Write ``rig`` (metres) as an aniposelib / Pose2Sim TOML with translations in ``units``
-    (``metadata.units`` states it)."""
+    """Write an aniposelib / Pose2Sim calibration TOML.
+
+    Write ``rig`` (metres) as an aniposelib / Pose2Sim TOML with translations in ``units``
+    (``metadata.units`` states it).
+    """
     if units not in CALIBRATION_UNITS:
         raise ValueError(f"units must be one of {', '.join(CALIBRATION_UNITS)}, got {units!r}")
     import tomli_w

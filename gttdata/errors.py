@@ -42,8 +42,11 @@ class ManifestError(GttDataError):
 
 
 class OutputError(GttDataError):
-    """An output cannot be written: full disk, read-only file system, an existing output without
-    ``--resume``/``--overwrite``, or a folder another process is writing (names the path)."""
+    """An output cannot be written.
+
+    An output cannot be written: full disk, read-only file system, an existing output without
+    ``--resume``/``--overwrite``, or a folder another process is writing (names the path).
+    """
 
 
 class PreviewDependencyError(GttDataError):

@@ -130,7 +130,7 @@ def write_bytes_atomic(path: str | Path, data: bytes | memoryview) -> None:
 
 
 def _fallocate():
-    """libc ``fallocate`` (Linux), or None."""
+    """The libc ``fallocate`` (Linux), or None."""
     import ctypes
 
     try:

@@ -246,8 +246,11 @@ class RecordingView:
 
 
 def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> Skeleton:
-    """The keypoints' topology: a project's skeleton table or name, else the recognised keypoint set
-    (a ``gttdata.skeletons`` name), else CMU-31 by its names, else a star rooted at joint 0."""
+    """The keypoints' topology of a recording.
+
+    The keypoints' topology: a project's skeleton table or name, else the recognised keypoint set
+    (a ``gttdata.skeletons`` name), else CMU-31 by its names, else a star rooted at joint 0.
+    """
     from gttdata.skeletons import get_skeleton
 
     if isinstance(wanted, dict):

@@ -34,8 +34,11 @@ def _copies() -> list[tuple[str, str]]:
 
 
 def assert_images_match(made: Path, committed: Path, *, max_mean: float = 0.5, max_frac: float = 0.002):
-    """Same size; mean absolute difference under ``max_mean`` (0-255) and under ``max_frac`` of the pixels
-    differing by more than 40 in any channel (anti-aliasing and font rasterisation may differ a little)."""
+    """Two images match up to rendering noise.
+
+    Same size; mean absolute difference under ``max_mean`` (0-255) and under ``max_frac`` of the pixels
+    differing by more than 40 in any channel (anti-aliasing and font rasterisation may differ a little).
+    """
     a, b = cv2.imread(str(made)), cv2.imread(str(committed))
     assert a is not None, f"{made}: not written"
     assert a.shape == b.shape, f"{committed.name}: committed {b.shape}, the command makes {a.shape}"

@@ -48,6 +48,7 @@ class TopologyMap:
         return np.einsum("ij,...jc->...ic", self.weights, positions)
 
     def __call__(self, motion: Motion) -> Motion:
+        """The same motion on the new skeleton (positions mapped by :meth:`apply`)."""
         return replace(motion, positions=self.apply(motion.positions), skeleton=self.skeleton)
 
 

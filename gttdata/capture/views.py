@@ -152,10 +152,13 @@ def _view_permutation(sample: CaptureSample, sequencing: str, seed: int | None) 
 
 
 def _stream_times(sample: CaptureSample, perm: np.ndarray) -> np.ndarray | None:
-    """What each camera's own clock says of its images: ``frame / fps`` at the camera's nominal rate, with
+    """Per-image times on each camera's own clock, or None.
+
+    What each camera's own clock says of its images: ``frame / fps`` at the camera's nominal rate, with
     the camera's frame counter (gaps where frames were dropped), from the capture parameters in ``meta``;
     None when ``meta`` does not record the rates. Offsets, drift and jitter are not in it (they are what
-    clock recovery estimates)."""
+    clock recovery estimates).
+    """
     fps = sample.meta.get("capture", {}).get("fps_hz") if isinstance(sample.meta, dict) else None
     if not fps or len(fps) <= int(sample.cam_id.max(initial=0)):
         return None

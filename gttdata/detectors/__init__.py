@@ -195,8 +195,11 @@ def read_keypoints(path: str | Path, fmt: str = "auto") -> Keypoints2D:
 
 
 def write_keypoints(kp: Keypoints2D, path: str | Path, fmt: str) -> Path:
-    """Write one camera's detections in ``fmt`` (``openpose``: a folder; ``dlc``: ``.h5`` or ``.csv``;
-    ``coco``: one ``.json`` results file)."""
+    """Write one camera's detections in a detector format.
+
+    Write one camera's detections in ``fmt`` (``openpose``: a folder; ``dlc``: ``.h5`` or ``.csv``;
+    ``coco``: one ``.json`` results file).
+    """
     reg = _registry()
     if fmt not in reg or reg[fmt].write is None:
         writable = ", ".join(k for k, v in reg.items() if v.write is not None)

@@ -69,8 +69,11 @@ def joint_rgb(skeleton: Skeleton) -> np.ndarray:
 
 
 def bone_rgb(skeleton: Skeleton) -> np.ndarray:
-    """Float RGB colour of each drawn limb of ``skeleton.limbs``, shape ``(L, 3)``: the colour of its side
-    (:func:`bone_sides`) in its subject's palette, as :func:`joint_rgb`."""
+    """Float RGB colour of each drawn limb, shape ``(L, 3)``.
+
+    Float RGB colour of each drawn limb of ``skeleton.limbs``, shape ``(L, 3)``: the colour of its side
+    (:func:`bone_sides`) in its subject's palette, as :func:`joint_rgb`.
+    """
     limbs = skeleton.limbs
     if not len(limbs):
         return np.zeros((0, 3))

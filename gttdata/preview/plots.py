@@ -24,7 +24,9 @@ class SampleSource(Protocol):
 
     def __len__(self) -> int: ...
 
-    def read_sample(self, i: int, variant: str = "orig") -> CaptureSample: ...
+    def read_sample(self, i: int, variant: str = "orig") -> CaptureSample:
+        """Sample ``i`` as the named variant (``"orig"`` or an augmented copy)."""
+        ...
 
 
 def _figure(width_in: float, height_in: float):
@@ -221,7 +223,9 @@ def plot_dataset(
     progress: bool = False,
     title: str | None = None,
 ) -> list[Path]:
-    """Write the dataset plots: ``timestamp_raster.png`` (of sample ``sample``), ``noise_sigma.png``,
+    """Write the dataset plots into a folder.
+
+    Write the dataset plots: ``timestamp_raster.png`` (of sample ``sample``), ``noise_sigma.png``,
     ``missing_rate.png``, ``sequence_length.png`` and ``motion_sources.png``.
 
     Args:

@@ -43,7 +43,7 @@ _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
 def opengl_camera_pose(cam_from_world: np.ndarray) -> np.ndarray:
-    """pyrender camera node pose for an OpenCV extrinsic: ``world_from_cam @ diag(1, -1, -1, 1)``.
+    """Camera node pose for pyrender for an OpenCV extrinsic: ``world_from_cam @ diag(1, -1, -1, 1)``.
 
     Args:
         cam_from_world: World→camera (OpenCV axes) transform, shape ``(4, 4)``.

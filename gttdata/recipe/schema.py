@@ -175,7 +175,9 @@ class FileRigSpec:
 
 @dataclass(frozen=True)
 class CaptureSpec:
-    """How each capture is recorded. Each parameter is a value or a distribution drawn per sample;
+    """How each capture is recorded.
+
+    How each capture is recorded. Each parameter is a value or a distribution drawn per sample;
     ``fps_hz`` and ``drift_ppm`` are drawn per camera.
 
     Args:

@@ -32,7 +32,9 @@ __all__ = ["export_json_cmd", "register"]
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object describing the file written.")
 @friendly_errors
 def export_json_cmd(input_path, sample, split, variant, units, out_path, overwrite, as_json):
-    """Write sample I of INPUT (a shard file, a dataset folder or a generate recipe) in the authors' GTT-Net
+    """Write a sample in the authors' GTT-Net JSON layout.
+
+    Write sample I of INPUT (a shard file, a dataset folder or a generate recipe) in the authors' GTT-Net
     JSON layout: K = 0 with world rays, camID, t, C, point3D, limbSeq, X_init and rayDInd (docs/FORMAT.md).
     `gttnet reconstruct OUT.json` reads it back.
 

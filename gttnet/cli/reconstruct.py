@@ -17,8 +17,11 @@ log = logging.getLogger(__name__)
 
 
 def _method_fields(rec) -> dict:
-    """``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto") and,
-    after clock recovery, ``clock_offsets_s`` ({camera: s})."""
+    """The method fields of a reconstruction's report.
+
+    ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto") and,
+    after clock recovery, ``clock_offsets_s`` ({camera: s}).
+    """
     out = {"method": rec.info.get("method_ran", rec.method)}
     if out["method"] != rec.method:
         out["requested_method"] = rec.method

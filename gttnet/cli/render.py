@@ -68,7 +68,9 @@ def render_cmd(
     as_json,
     extra_keypoints,
 ):
-    """Draw a reconstructed recording: one MP4 per camera overlaying the reprojected 3-D joints (with
+    """Draw a reconstructed recording over its input.
+
+    Draw a reconstructed recording: one MP4 per camera overlaying the reprojected 3-D joints (with
     lens distortion) on the input 2-D keypoints with per-joint reprojection error, a 3-D animation and
     a per-camera timing plot.
 

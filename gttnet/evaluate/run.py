@@ -251,8 +251,11 @@ def run_job(recipe: EvalRecipe, job: Job, todo: frozenset[tuple[str, str]] | Non
 
 
 def _offset_error_frames(obs, rec: Reconstruction, gt) -> float | None:
-    """Median over cameras of the recovered clock's error in that camera's frames (one common shift
-    removed: it is unobservable), for methods that recover clocks (``info["clocks"]``); else None."""
+    """Median clock error in frames of the recovered clocks, or None.
+
+    Median over cameras of the recovered clock's error in that camera's frames (one common shift
+    removed: it is unobservable), for methods that recover clocks (``info["clocks"]``); else None.
+    """
     clocks = rec.info.get("clocks")
     if not clocks or "timestamp_s" not in rec.info:
         return None

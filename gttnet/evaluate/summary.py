@@ -67,6 +67,11 @@ def mean_interval(values: np.ndarray, kind: str, *, n_boot: int = 4000, seed: in
     Args:
         values: Per-sequence errors (non-negative), shape ``(n,)``.
         kind: ``ci95`` or ``std``.
+        n_boot: Bootstrap resamples for ``ci95``.
+        seed: Seed of the bootstrap resampling (the interval is reproducible).
+
+    Returns:
+        ``(low, high)``.
     """
     v = np.asarray(values, dtype=np.float64)
     m = float(v.mean())

@@ -117,8 +117,11 @@ def spec_from_json(text: str) -> RecordingSpec:
 
 
 def view_of_loaded(loaded) -> RecordingView:
-    """A :class:`~gttdata.recording.RecordingView` of a shard / .mat / .json input (cameras ``cam_<v>``,
-    frame = stream index, rates unknown), so motion files can be written for any input."""
+    """A recording view of a shard / .mat / .json input.
+
+    A :class:`~gttdata.recording.RecordingView` of a shard / .mat / .json input (cameras ``cam_<v>``,
+    frame = stream index, rates unknown), so motion files can be written for any input.
+    """
     obs = loaded.observations
     v = int(np.asarray(obs.image_size).shape[0])
     frame = obs.stream_index if obs.stream_index is not None else np.full(obs.n_images, -1)

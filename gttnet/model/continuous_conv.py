@@ -96,8 +96,11 @@ class ContinuousConv(nn.Module):
     def _forward_reference(
         self, x: torch.Tensor, index: torch.Tensor, mask: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The direct (point-major) formulation of :meth:`forward`, kept as its reference in the tests and
-        ``benchmarks/bench_train_step.py``; same weights, same outputs up to float rounding."""
+        """The direct (point-major) formulation of :meth:`forward`.
+
+        The direct (point-major) formulation of :meth:`forward`, kept as its reference in the tests and
+        ``benchmarks/bench_train_step.py``; same weights, same outputs up to float rounding.
+        """
         m = mask.to(x.dtype)
         patch = x[index]  # (N, S, P, 3)
         centred = (patch - patch.mean(dim=2, keepdim=True)) * m[:, :, None, None]

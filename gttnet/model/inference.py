@@ -173,8 +173,11 @@ class GTTNetReconstructor:
 
 
 def _given_order(obs: Observations, affinity: np.ndarray) -> np.ndarray:
-    """The order the sequencing condition fixes: the timestamps under ``full``; under ``partial`` the
-    affinity's spectral order made to agree with every stream."""
+    """The order the sequencing condition fixes.
+
+    The order the sequencing condition fixes: the timestamps under ``full``; under ``partial`` the
+    affinity's spectral order made to agree with every stream.
+    """
     if obs.sequencing == "full":
         return timestamp_order(obs.timestamp_s)
     return stream_consistent_order(spectral_order(affinity), obs.cam_id, obs.stream_index)
@@ -204,9 +207,12 @@ _CACHE: dict[tuple[str, str, str], GTTNetReconstructor] = {}
 def reconstruct_gttnet(
     obs: Observations, model: str | None = None, lambda2: float | None = None, candidates: str = "auto"
 ) -> Reconstruction:
-    """GTT-Net with the bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31
+    """GTT-Net with a bundled model or a given model file.
+
+    GTT-Net with the bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31
     model for CMU-31, the PointNet model otherwise), or the model file/run directory ``model``;
-    ``lambda2`` and ``candidates`` as in :class:`GTTNetReconstructor`."""
+    ``lambda2`` and ``candidates`` as in :class:`GTTNetReconstructor`.
+    """
     if model is None:
         model = str(bundled_model_for(obs.skeleton))
     key = (str(model), str(lambda2), candidates)

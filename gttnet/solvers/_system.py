@@ -52,8 +52,15 @@ def build_system(C, r, vis, *, lambda2, x_prior, eps) -> StructureSystem:
     """Pinned (``lambda2=None``: depth along the ray, 3 free coordinates when missing) or full-3N systems.
 
     Args:
-        C: Centres, shape ``(B, N, 3)``. r: rays ``(B, N, J, 3)``. vis: mask ``(B, N, J)``.
-        lambda2: Ray weight or None. x_prior: ``(B, N, J, 3)`` or None. eps: ridge ``(B,)`` or None.
+        C: Camera centres, shape ``(B, N, 3)``.
+        r: Unit rays, shape ``(B, N, J, 3)``.
+        vis: Visibility mask, shape ``(B, N, J)``.
+        lambda2: Ray weight, or None for the pinned system.
+        x_prior: Prior points, shape ``(B, N, J, 3)``, or None.
+        eps: Ridge per batch item, shape ``(B,)``, or None.
+
+    Returns:
+        The assembled :class:`StructureSystem`.
     """
     b, n, j, _ = r.shape
     s = b * j

@@ -103,7 +103,9 @@ def local_times(
 
 @dataclass(frozen=True)
 class Clocks:
-    """Recovered clock of every camera: frame ``k`` of camera ``c`` was taken at global time
+    """Recovered clock of every camera.
+
+    Recovered clock of every camera: frame ``k`` of camera ``c`` was taken at global time
     ``offset_s[c] + (1 + drift_ppm[c] 1e-6) tau_k``, with ``tau_k`` the frame's time on the camera's own
     clock (``k / rate_hz[c]``, or the per-frame timestamp when one was given).
 

@@ -186,9 +186,12 @@ def _streams(
 
 
 def _pair_errors(a: Stream, b: Stream, ia: np.ndarray, tq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Ray-meeting errors of ``a``'s smoothed frames ``ia`` against ``b`` interpolated at ``tq``, shape
+    """Noise-normalised ray-meeting errors of a camera pair at one shift, shape ``(m, J)``.
+
+    Ray-meeting errors of ``a``'s smoothed frames ``ia`` against ``b`` interpolated at ``tq``, shape
     ``(m, J)``; each divided by the square root of the pair's relative noise variance, so pure noise
-    scores alike at every shift."""
+    scores alike at every shift.
+    """
     rb, cb, okb, vb = b.at(tq)
     err, ok = ray_meeting_error(a.centers[:, ia, None], a.rays[:, ia], cb[:, :, None], rb)
     ok &= okb & a.ok[ia]
@@ -197,8 +200,11 @@ def _pair_errors(a: Stream, b: Stream, ia: np.ndarray, tq: np.ndarray) -> tuple[
 
 
 def _consensus(a: Stream, b: Stream, ia: np.ndarray, shifts: np.ndarray, cap: float) -> np.ndarray:
-    """Consensus score of each shift (``tau_b = tau_a + shift``): sum of ``(1 - (e / cap)^2)^2`` over
-    meeting rays with ``e < cap``. Rewards overlap only where the rays agree."""
+    """Consensus score of each candidate shift.
+
+    Consensus score of each shift (``tau_b = tau_a + shift``): sum of ``(1 - (e / cap)^2)^2`` over
+    meeting rays with ``e < cap``. Rewards overlap only where the rays agree.
+    """
     score = np.empty(shifts.shape[0])
     chunk = max(1, 200_000 // max(ia.size * a.rays.shape[2], 1))
     for s0 in range(0, shifts.shape[0], chunk):
@@ -267,8 +273,11 @@ def pair_offset(
 
 
 def _fuse_offsets(n: int, pairs: list[tuple[int, int, float, float]], scale: float) -> np.ndarray:
-    """Offsets ``o`` (``o[0] = 0``) from pair equations ``o_a - o_b = delta_ab`` by IRLS with a Huber
-    weight of width ``scale`` seconds; each equation weighted by its consensus score."""
+    """Camera offsets from pairwise offset equations by Huber IRLS.
+
+    Offsets ``o`` (``o[0] = 0``) from pair equations ``o_a - o_b = delta_ab`` by IRLS with a Huber
+    weight of width ``scale`` seconds; each equation weighted by its consensus score.
+    """
     A = np.zeros((len(pairs), n))
     y = np.zeros(len(pairs))
     w0 = np.zeros(len(pairs))
@@ -300,8 +309,11 @@ class _Refiner:
         return o, d
 
     def residuals(self, p: np.ndarray, only: int | None = None, base: np.ndarray | None = None) -> np.ndarray:
-        """All residuals; with ``only`` (a camera) and ``base`` (the residuals at other parameters), only the
-        pairs that involve camera ``only`` are recomputed (a Jacobian column)."""
+        """All residuals, or only those of the pairs that involve one camera.
+
+        All residuals; with ``only`` (a camera) and ``base`` (the residuals at other parameters), only the
+        pairs that involve camera ``only`` are recomputed (a Jacobian column).
+        """
         o, d = self.unpack(p)
         out, nv, pos = [], 0, 0
         for i, j in self.pairs:

@@ -1,5 +1,8 @@
-"""Augmentations: F^GR keeps the 2-D observations and moves the ground truth by meta['variant_from_orig'];
-F^LR re-images the same ground truth consistently; motion edits mirror and scale as documented."""
+"""Augmentations keep what they must and move what they must.
+
+Augmentations: F^GR keeps the 2-D observations and moves the ground truth by meta['variant_from_orig'];
+F^LR re-images the same ground truth consistently; motion edits mirror and scale as documented.
+"""
 
 from __future__ import annotations
 

@@ -114,8 +114,11 @@ def test_rendered_joints_sit_at_rig_camera_projections(gl, tiny_sample):
 
 
 def test_rendered_joints_sit_at_projections_of_an_asymmetric_camera(gl, tiny_sample):
-    """fx != fy, off-centre principal point, non-square image and a rolled camera: a transposed or
-    flipped convention would move blobs by tens of pixels."""
+    """Projection conventions survive an asymmetric camera.
+
+    ``fx != fy``, off-centre principal point, non-square image and a rolled camera: a transposed or
+    flipped convention would move blobs by tens of pixels.
+    """
     K = np.array([[900.0, 0.0, 430.0], [0.0, 1150.0, 250.0], [0.0, 0.0, 1.0]])
     T = look_at(np.array([2.2, -1.6, 1.9]), np.array([0.1, 0.2, 0.9]))
     roll = np.eye(4)

@@ -160,8 +160,11 @@ def test_params_must_match_camera_count():
 
 
 def test_cameras_started_seconds_before_the_capture():
-    """start_spread_s: every camera still films the whole window, its frame numbers count from its own start,
-    and frame k of camera v lies at offset_v + k / fps_v (drift 0, no jitter)."""
+    """Cameras that start at different times.
+
+    start_spread_s: every camera still films the whole window, its frame numbers count from its own start,
+    and frame k of camera v lies at offset_v + k / fps_v (drift 0, no jitter).
+    """
     fps = (25.0, 30.0, 60.0, 25.0)
     s = _simulate(seed=4, fps_hz=fps, start_spread_s=5.0, image_drop_rate=0.1)
     offsets = np.asarray(s.meta["offsets_s"])

@@ -1,5 +1,8 @@
-"""Topology-diverse data: procedural hand and quadruped, topology augmentation, recipes with a
-``skeleton`` key, mixed-topology shards and loader, previews of any skeleton."""
+"""Topology-diverse data.
+
+Topology-diverse data: procedural hand and quadruped, topology augmentation, recipes with a
+``skeleton`` key, mixed-topology shards and loader, previews of any skeleton.
+"""
 
 from __future__ import annotations
 

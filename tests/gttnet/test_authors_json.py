@@ -1,5 +1,8 @@
-"""The authors' GTT-Net JSON layout (scalar K = 0 with rays, camID, t, limbSeq, X_init, rayDInd): read,
-write, round trip, and one-line errors."""
+"""The authors' GTT-Net JSON layout.
+
+The authors' GTT-Net JSON layout (scalar K = 0 with rays, camID, t, limbSeq, X_init, rayDInd): read,
+write, round trip, and one-line errors.
+"""
 
 from __future__ import annotations
 
@@ -50,7 +53,7 @@ def test_round_trip_authors_layout(tmp_path, coco_sample, units):
 
 
 def test_authors_file_with_cycling_camids_and_unsorted_times(tmp_path, coco_sample):
-    """camID given once per camera and cycling; t out of file order; 0-based limbSeq: order from t."""
+    """``camID`` given once per camera and cycling; t out of file order; 0-based limbSeq: order from t."""
     path = write_gttnet_json(coco_sample, tmp_path / "cap.json")
     d = json.loads(path.read_text())
     n = len(d["camID"])

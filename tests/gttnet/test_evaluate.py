@@ -145,7 +145,7 @@ def test_group_stats_and_error_bars():
 
 
 def test_mean_interval_never_reaches_below_zero():
-    """n = 2 with a t-interval drew bars to -40 mm; the bootstrap interval stays within the data's range."""
+    """With n = 2 a t-interval once drew bars to -40 mm; the bootstrap interval stays within the data's range."""
     v = np.array([2.0, 60.0])
     assert 31.0 - error_bar(v, "ci95") < -300  # the old bar
     lo, hi = mean_interval(v, "ci95")

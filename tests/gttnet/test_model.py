@@ -243,7 +243,7 @@ def test_build_model_rejects_unknown():
 
 
 def test_gradcheck_end_to_end_through_affinity_and_solver(scene_factory):
-    """d X^E / d X_init in float64 on N = 8, J = 3: U-Net → A^D → top-Q A^S → DLOE layer."""
+    """Gradient ``d X^E / d X_init`` in float64 on N = 8, J = 3: U-Net → A^D → top-Q A^S → DLOE layer."""
     sample = scene_factory(n_cameras=2, n_joints=3, frames_per_camera=4, sigma_px=1.0, seed=5)
     seq = prepare_inputs(make_view(sample, "none")[0], k=4, dtype=torch.float64)
     torch.manual_seed(0)
@@ -312,8 +312,11 @@ def tiny_model_path(tmp_path):
 
 
 def test_full_sequencing_returns_timestamp_order_and_uses_the_timing(scene_factory, tiny_model_path):
-    """Under full, the order is the timestamp order and the solver interpolates in time, so even an
-    untrained network is no worse than DLOE, which is given the same timestamps."""
+    """Under full sequencing an untrained network is no worse than DLOE.
+
+    Under full, the order is the timestamp order and the solver interpolates in time, so even an
+    untrained network is no worse than DLOE, which is given the same timestamps.
+    """
     from gttnet.baselines.registry import reconstruct
     from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
 

@@ -261,7 +261,7 @@ def _run_torchrun(tmp_path: Path) -> subprocess.CompletedProcess:
 
 
 def test_ddp_two_processes_gloo(tmp_path):
-    """torchrun with 2 CPU processes (gloo): disjoint samples per rank, replicas checked equal at the end."""
+    """Run ``torchrun`` with 2 CPU processes (gloo): disjoint samples per rank, replicas checked equal at the end."""
     proc = _run_torchrun(tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert (tmp_path / "ddp" / "model.pt").is_file()

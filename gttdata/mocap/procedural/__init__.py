@@ -1,5 +1,8 @@
-"""Built-in procedural motion sources: seeded kinematic synthesis of human motion on the CMU-31 skeleton
-(and the keypoint sets derived from it), of a hand (hand-21) and of a quadruped (quadruped36)."""
+"""Built-in procedural motion sources.
+
+Built-in procedural motion sources: seeded kinematic synthesis of human motion on the CMU-31 skeleton
+(and the keypoint sets derived from it), of a hand (hand-21) and of a quadruped (quadruped36).
+"""
 
 from __future__ import annotations
 

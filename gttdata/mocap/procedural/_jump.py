@@ -79,7 +79,9 @@ def _apply_keys(track: Track, keys: list[tuple], rng: np.random.Generator) -> No
 def jump_track(
     rng: np.random.Generator, n_frames: int, fps_hz: float, body: Body, *, speed_scale: float | None
 ) -> tuple[Track, dict]:
-    """Track of jumps separated by standing: countermovement jumps (in place, forward, with a half
+    """Track of jumps separated by standing.
+
+    Track of jumps separated by standing: countermovement jumps (in place, forward, with a half
     turn) or a bout of small rope-skipping hops.
 
     Args:

@@ -53,8 +53,10 @@ def _two_bone(root: np.ndarray, target: np.ndarray, l1: float, l2: float, bend: 
     """Middle joint and (clamped) end of a two-bone chain from ``root`` toward ``target``.
 
     Args:
-        root, target: Shape ``(T, 3)``.
-        l1, l2: Segment lengths.
+        root: Chain start, shape ``(T, 3)``.
+        target: Point the chain reaches toward, shape ``(T, 3)``.
+        l1: Length of the first segment.
+        l2: Length of the second segment.
         bend: Direction the middle joint bends toward, shape ``(T, 3)`` (need not be orthogonal).
 
     Returns:
