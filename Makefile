@@ -19,6 +19,7 @@ demo: install system-deps
 lint:
 	$(PYTHON) -m ruff check gttdata gttnet tests benchmarks
 	$(PYTHON) -m ruff format --check gttdata gttnet tests benchmarks
+	$(PYTHON) -m mypy
 
 pytest:
 	$(PYTHON) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "pytest: no tests collected"; exit 0; fi; exit $$rc
