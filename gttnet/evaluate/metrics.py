@@ -62,7 +62,8 @@ def _procrustes_align(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     R = np.einsum("nab,nbc->nac", U, Vt)  # maps row vectors: a @ R ~ b
     var = (a**2).sum(axis=(1, 2))
     scale = np.where(var > 0, S.sum(axis=1) / np.where(var > 0, var, 1.0), 1.0)
-    return scale[:, None, None] * np.einsum("nja,nab->njb", a, R) + mu_d
+    out: np.ndarray = scale[:, None, None] * np.einsum("nja,nab->njb", a, R) + mu_d
+    return out
 
 
 def pa_mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:

@@ -105,7 +105,8 @@ def use_candidate_search(sequencing: str, n_images: int, candidates: str) -> boo
 def _unit_rays(rays: np.ndarray, visible: np.ndarray) -> np.ndarray:
     r = np.where(visible[..., None], rays, 0.0)
     norm = np.linalg.norm(r, axis=-1, keepdims=True)
-    return np.divide(r, norm, out=np.zeros_like(r), where=norm > 0)
+    out: np.ndarray = np.divide(r, norm, out=np.zeros_like(r), where=norm > 0)
+    return out
 
 
 def epipolar_descriptors(
@@ -136,7 +137,8 @@ def epipolar_descriptors(
     d = np.stack([n @ u, n @ v], axis=-1)
     norm = np.linalg.norm(d, axis=-1, keepdims=True)
     d = np.divide(d, norm, out=np.zeros_like(d), where=(norm > 1e-9) & visible[..., None])
-    return d.reshape(d.shape[0], -1)
+    out: np.ndarray = d.reshape(d.shape[0], -1)
+    return out
 
 
 def candidate_partners(
@@ -207,10 +209,10 @@ def pair_costs(
     """
     p = rows.shape[0]
     j = r.shape[1]
-    R = np.ascontiguousarray(r.transpose(2, 0, 1), dtype=dtype)  # (3, N, J)
-    M = np.ascontiguousarray(np.cross(C[:, None, :], r).transpose(2, 0, 1), dtype=dtype)
+    R: np.ndarray = np.ascontiguousarray(r.transpose(2, 0, 1), dtype=dtype)  # (3, N, J)
+    M: np.ndarray = np.ascontiguousarray(np.cross(C[:, None, :], r).transpose(2, 0, 1), dtype=dtype)
     rC = np.einsum("njk,nk->nj", r, C).astype(dtype)
-    Cd = C.astype(dtype)
+    Cd: np.ndarray = C.astype(dtype)
     cost = np.empty(p)
     conv = np.empty(p)
     valid = np.empty((p, j), dtype=bool)
@@ -359,7 +361,17 @@ def candidate_pseudo_triangulate(
     return _rank(C, r, vis, cand, cost, conv, valid, depth, min_angle_deg)
 
 
-def _rank(C, r, vis, cand, cost, conv, valid, depth, min_angle_deg) -> CandidatePseudoTriangulation:
+def _rank(
+    C: np.ndarray,
+    r: np.ndarray,
+    vis: np.ndarray,
+    cand: np.ndarray,
+    cost: np.ndarray,
+    conv: np.ndarray,
+    valid: np.ndarray,
+    depth: np.ndarray,
+    min_angle_deg: float,
+) -> CandidatePseudoTriangulation:
     """Sort each row's slots by cost and build X_init (demoted partners last).
 
     Only the ``(N, M)`` arrays are reordered; X_init reads the ``(N, M, J)`` ones through a per-slot key.

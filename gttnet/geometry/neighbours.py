@@ -39,7 +39,7 @@ def _ranked(cost: np.ndarray, order: np.ndarray | None) -> np.ndarray:
 
 
 def _partial_row(
-    i: int, rank: np.ndarray, finite: np.ndarray, cam: np.ndarray, prev, nxt, k: int
+    i: int, rank: np.ndarray, finite: np.ndarray, cam: np.ndarray, prev: np.ndarray, nxt: np.ndarray, k: int
 ) -> list[int]:
     """Best-first growth: from each other stream, one contiguous run grown from its best-ranked image."""
     heap: list[tuple[int, int]] = []

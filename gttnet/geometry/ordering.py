@@ -22,7 +22,7 @@ def _symmetric_affinity(A: np.ndarray) -> np.ndarray:
         raise ValueError("affinity must be finite, found NaN or inf")
     if np.any(A < 0):
         raise ValueError(f"affinity must be non-negative, found minimum {A.min():.3g}")
-    S = 0.5 * (A + A.T)
+    S: np.ndarray = 0.5 * (A + A.T)
     np.fill_diagonal(S, 0.0)
     return S
 
@@ -51,7 +51,8 @@ def graph_components(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
     rank = np.lexsort((first, -sizes))  # size descending, then first index
     relabel = np.empty_like(rank)
     relabel[rank] = np.arange(rank.shape[0])
-    return relabel[np.searchsorted(labels, raw)]
+    out: np.ndarray = relabel[np.searchsorted(labels, raw)]
+    return out
 
 
 #: Components larger than this, with at most this share of non-zero affinities, take the sparse solver.
@@ -77,11 +78,11 @@ def _fiedler(S: np.ndarray) -> np.ndarray:
         L = (diags(deg) - W).tocsc()
         sigma = -1e-6 * max(float(deg.mean()), 1e-12)
         vals, vec = eigsh(L, k=2, sigma=sigma, which="LM", v0=np.ones(n) / np.sqrt(n) + np.arange(n) / n**1.5)
-        return vec[:, np.argsort(vals)[-1]]
+        return np.asarray(vec[:, np.argsort(vals)[-1]])
     L = np.diag(S.sum(axis=1)) - S
     # Only the two smallest eigenpairs are needed; subset_by_index avoids a full decomposition.
     _, vec = scipy.linalg.eigh(L, subset_by_index=[0, min(1, n - 1)])
-    return vec[:, -1]
+    return np.asarray(vec[:, -1])
 
 
 def _runs_backwards(local: np.ndarray) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,9 +42,10 @@ def _assemble(
     Mc = M.tocoo()
     ri, ci, vals = Mc.row, Mc.col, Mc.data
     V0 = V[:, :, 0]
-    data = [np.einsum("jkd,jkd->jk", V0[:, ri], V0[:, ci]).ravel() * np.tile(vals, j)]
-    rows, cols = [pos[:, ri, 0].ravel()], [pos[:, ci, 0].ravel()]
-    extra = act[:, :, 1:].any(-1)
+    data: list[np.ndarray] = [np.einsum("jkd,jkd->jk", V0[:, ri], V0[:, ci]).ravel() * np.tile(vals, j)]
+    rows: list[np.ndarray] = [pos[:, ri, 0].ravel()]
+    cols: list[np.ndarray] = [pos[:, ci, 0].ravel()]
+    extra = np.asarray(act[:, :, 1:].any(-1))
     jj, kk = np.nonzero(extra[:, ri] | extra[:, ci])
     if jj.size:
         blk = V[jj, ri[kk]] @ V[jj, ci[kk]].transpose(0, 2, 1)
@@ -57,10 +59,10 @@ def _assemble(
         data.append(D.ravel())
         rows.append(np.broadcast_to(pos[..., :, None], D.shape).ravel())
         cols.append(np.broadcast_to(pos[..., None, :], D.shape).ravel())
-    data, rows, cols = np.concatenate(data), np.concatenate(rows), np.concatenate(cols)
-    keep = (rows >= 0) & (cols >= 0)
+    d, r, c = np.concatenate(data), np.concatenate(rows), np.concatenate(cols)
+    keep = (r >= 0) & (c >= 0)
     size = int(act.sum())
-    return sp.csc_matrix((data[keep], (rows[keep], cols[keep])), shape=(size, size)), pos
+    return sp.csc_matrix((d[keep], (r[keep], c[keep])), shape=(size, size)), pos
 
 
 class _SparseSolve(torch.autograd.Function):
@@ -72,7 +74,7 @@ class _SparseSolve(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, A: torch.Tensor, lambda1: float, sys: StructureSystem) -> torch.Tensor:  # noqa: D102
+    def forward(ctx: Any, A: torch.Tensor, lambda1: float, sys: StructureSystem) -> torch.Tensor:  # noqa: D102
         b, n, j = sys.batch, A.shape[-1], sys.joints
         An = A.detach().cpu().double().numpy()
         V = sys.V.detach().cpu().double().numpy().reshape(b, j, n, 3, 3)
@@ -87,6 +89,7 @@ class _SparseSolve(torch.autograd.Function):
             H, pos = _assemble(M, V[k], act[k], None if W is None else W[k])
             q = -(M @ Ct[k].transpose(1, 0, 2).reshape(n, 3 * j)).reshape(n, j, 3).transpose(1, 0, 2)
             if W is not None:
+                assert w is not None  # the ray-weighted system always carries both
                 q += w[k] - (W[k] @ Ct[k][..., None])[..., 0]
             rhs = np.einsum("jnsd,jnd->jns", V[k], q)[act[k]]
             try:
@@ -101,7 +104,7 @@ class _SparseSolve(torch.autograd.Function):
         return X
 
     @staticmethod
-    def backward(ctx, grad_X: torch.Tensor):  # noqa: D102
+    def backward(ctx: Any, grad_X: torch.Tensor) -> tuple[torch.Tensor, None, None]:  # noqa: D102
         (X,) = ctx.saved_tensors
         sys = ctx.sys
         b, n, j = sys.batch, X.shape[1], sys.joints
@@ -137,4 +140,5 @@ def solve_sparse(A: torch.Tensor, lambda1: float, sys: StructureSystem) -> torch
     Returns:
         X, shape ``(B, N, J, 3)``, A's dtype and device.
     """
-    return _SparseSolve.apply(A, lambda1, sys)
+    X: torch.Tensor = _SparseSolve.apply(A, lambda1, sys)  # type: ignore[no-untyped-call]  # torch leaves it untyped
+    return X

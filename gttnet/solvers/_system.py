@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 
@@ -48,7 +49,15 @@ class StructureSystem:
         return X.reshape(self.batch, self.joints, n, 3).transpose(1, 2)
 
 
-def build_system(C, r, vis, *, lambda2, x_prior, eps) -> StructureSystem:
+def build_system(
+    C: torch.Tensor,
+    r: torch.Tensor,
+    vis: torch.Tensor,
+    *,
+    lambda2: float | None,
+    x_prior: torch.Tensor | None,
+    eps: torch.Tensor | None,
+) -> StructureSystem:
     """Pinned (``lambda2=None``: depth along the ray, 3 free coordinates when missing) or full-3N systems.
 
     Args:
@@ -83,6 +92,8 @@ def build_system(C, r, vis, *, lambda2, x_prior, eps) -> StructureSystem:
         w = lambda2 * (P @ CS.unsqueeze(-1)).squeeze(-1)
     V = V * active.unsqueeze(-1)
     if x_prior is not None:
+        if eps is None:
+            raise ValueError("x_prior needs its ridge weight eps, shape (B,)")
         e = eps.repeat_interleave(j).view(s, 1, 1)
         xp = x_prior.permute(0, 2, 1, 3).reshape(s, n, 3)
         ridge = (e.unsqueeze(-1) * eye).expand(s, n, 3, 3)
@@ -97,11 +108,14 @@ def _linear_term(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
     Ct4 = sys.Ct.reshape(sys.batch, sys.joints, n, 3)
     q = -(M.unsqueeze(1) @ Ct4).reshape(-1, n, 3)
     if sys.W is not None:
+        assert sys.w is not None  # the ray-weighted system always carries both
         q = q - (sys.W @ sys.Ct.unsqueeze(-1)).squeeze(-1) + sys.w
     return q
 
 
-def _block_diag_term(V0, VE, nE, W, n):
+def _block_diag_term(
+    V0: torch.Tensor, VE: torch.Tensor, nE: torch.Tensor, W: torch.Tensor, n: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per-image ``v_a^T W_n v_b`` blocks split as (slot-0 diagonal, slot-0 x extra, extra x extra)."""
     s = V0.shape[0]
     ar = torch.arange(s, device=V0.device)[:, None]
@@ -205,7 +219,7 @@ class _DenseSolve(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:  # noqa: D102
+    def forward(ctx: Any, M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:  # noqa: D102
         lay = _layout(sys)
         H, rhs = _assemble_dense(M, sys, lay)
         kind, fac = _factor(H)
@@ -215,7 +229,7 @@ class _DenseSolve(torch.autograd.Function):
         return X
 
     @staticmethod
-    def backward(ctx, grad_X: torch.Tensor):  # noqa: D102
+    def backward(ctx: Any, grad_X: torch.Tensor) -> tuple[torch.Tensor, None]:  # noqa: D102
         (X,) = ctx.saved_tensors
         lay, sys = ctx.lay, ctx.sys
         s, n, _ = sys.active.shape
@@ -251,7 +265,8 @@ def solve_dense(M: torch.Tensor, sys: StructureSystem) -> torch.Tensor:
         t is not None and t.requires_grad for t in (sys.V, sys.Ct, sys.W, sys.w)
     )
     if not geometry_grad:
-        return _DenseSolve.apply(M, sys)
+        X: torch.Tensor = _DenseSolve.apply(M, sys)  # type: ignore[no-untyped-call]  # torch leaves it untyped
+        return X
     lay = _layout(sys)
     H, rhs = _assemble_dense(M, sys, lay)
     kind, fac = _factor(H)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+from typing import TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
@@ -12,6 +14,9 @@ from scipy.sparse.csgraph import connected_components
 from gttnet.errors import SingularStructureError
 from gttnet.solvers._sparse import solve_sparse
 from gttnet.solvers._system import build_system, solve_dense
+
+#: Centres, rays, masks and priors: tensors, or anything ``torch.as_tensor`` takes.
+ArrayIn: TypeAlias = "torch.Tensor | npt.ArrayLike"
 
 __all__ = [
     "DLOESolver",
@@ -99,16 +104,18 @@ def noise_aware_lambda2(sigma_px: float, f_px: float, depth_m: float, *, prior_s
     return float((prior_std_m / s) ** 2)
 
 
-def _as_inputs(A, centers, rays, visible, x_prior):
+def _as_inputs(
+    A: torch.Tensor, centers: ArrayIn, rays: ArrayIn, visible: ArrayIn, x_prior: ArrayIn | None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None, bool]:
     """Validate and convert to tensors on A's device and dtype, all with a leading batch axis."""
     if not torch.is_tensor(A):
         raise TypeError(f"A must be a torch tensor, got {type(A).__name__}")
     if A.ndim not in (2, 3) or A.shape[-1] != A.shape[-2]:
         raise ValueError(f"A must have shape (N, N) or (B, N, N), got {tuple(A.shape)}")
     batched = A.ndim == 3
-    kw = {"dtype": A.dtype, "device": A.device}
-    C = torch.as_tensor(centers, **kw)
-    r = torch.as_tensor(rays, **kw)
+    dt, dev = A.dtype, A.device
+    C = torch.as_tensor(centers, dtype=dt, device=dev)
+    r = torch.as_tensor(rays, dtype=dt, device=dev)
     vis = torch.as_tensor(visible, device=A.device).bool()
     n = A.shape[-1]
     j = vis.shape[-1]
@@ -126,16 +133,18 @@ def _as_inputs(A, centers, rays, visible, x_prior):
     C3 = C.expand(b, n, 3) if C.ndim == 3 else C.unsqueeze(0).expand(b, n, 3)
     r4 = r.expand(b, n, j, 3) if r.ndim == 4 else r.unsqueeze(0).expand(b, n, j, 3)
     v3 = vis.expand(b, n, j) if vis.ndim == 3 else vis.unsqueeze(0).expand(b, n, j)
-    r4 = torch.where(v3.unsqueeze(-1), r4, torch.zeros((), **kw))
+    r4 = torch.where(v3.unsqueeze(-1), r4, torch.zeros((), dtype=dt, device=dev))
     if not (torch.isfinite(A).all() and torch.isfinite(C).all() and torch.isfinite(r4).all()):
         raise ValueError("A, centers and the visible rays must be finite")
     norm = r4.norm(dim=-1, keepdim=True)
     if bool((v3 & (norm[..., 0] == 0)).any()):
         raise ValueError("every visible joint needs a non-zero ray")
-    r4 = r4 / torch.where(v3.unsqueeze(-1), norm, torch.ones((), **kw))  # unit rays (P = I - r r^T needs it)
+    r4 = r4 / torch.where(
+        v3.unsqueeze(-1), norm, torch.ones((), dtype=dt, device=dev)
+    )  # unit rays (P = I - r r^T needs it)
     xp = None
     if x_prior is not None:
-        xp = torch.as_tensor(x_prior, **kw)
+        xp = torch.as_tensor(x_prior, dtype=dt, device=dev)
         xp = xp.expand(b, n, j, 3) if xp.ndim == 4 else xp.unsqueeze(0).expand(b, n, j, 3)
     return A3, C3, r4, v3, xp, batched
 
@@ -168,7 +177,18 @@ def _check_solvable(A: torch.Tensor, rays: torch.Tensor, vis: torch.Tensor, lamb
             )
 
 
-def _solve(A, centers, rays, visible, *, lambda1, lambda2, method, x_prior, prior_weight) -> torch.Tensor:
+def _solve(
+    A: torch.Tensor,
+    centers: ArrayIn,
+    rays: ArrayIn,
+    visible: ArrayIn,
+    *,
+    lambda1: float,
+    lambda2: float | None,
+    method: str,
+    x_prior: ArrayIn | None,
+    prior_weight: float,
+) -> torch.Tensor:
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
     if lambda1 < 0 or (lambda2 is not None and lambda2 <= 0):
@@ -205,14 +225,14 @@ def _solve(A, centers, rays, visible, *, lambda1, lambda2, method, x_prior, prio
 
 def solve_structure(
     A: torch.Tensor,
-    centers,
-    rays,
-    visible,
+    centers: ArrayIn,
+    rays: ArrayIn,
+    visible: ArrayIn,
     *,
     lambda1: float = 0.1,
     lambda2: float | None = None,
     method: str = "auto",
-    x_prior=None,
+    x_prior: ArrayIn | None = None,
     prior_weight: float = 1e-6,
 ) -> torch.Tensor:
     """Structure X minimising the DLOE objective for a given affinity (REFERENCE.md, "The DLOE X-step").
@@ -267,7 +287,13 @@ def solve_structure(
 
 
 def solve_structure_dense(
-    A: torch.Tensor, centers, rays, visible, *, lambda1: float = 0.1, lambda2: float = 1e10
+    A: torch.Tensor,
+    centers: ArrayIn,
+    rays: ArrayIn,
+    visible: ArrayIn,
+    *,
+    lambda1: float = 0.1,
+    lambda2: float = 1e10,
 ) -> torch.Tensor:
     """Reference X-step as in the published code: a dense 3N x 3N solve per joint (slow; for tests).
 
@@ -308,13 +334,13 @@ def solve_structure_dense(
     idx = torch.arange(n, device=A3.device)
     Hv[:, :, idx, :, idx, :] = Hv[:, :, idx, :, idx, :] + lambda2 * P.permute(2, 0, 1, 3, 4)
     rhs = lambda2 * (P @ C.unsqueeze(1).unsqueeze(-1)).reshape(b, j, 3 * n, 1)
-    x = torch.linalg.solve(H, rhs).reshape(b, j, n, 3).transpose(1, 2)
+    x: torch.Tensor = torch.linalg.solve(H, rhs).reshape(b, j, n, 3).transpose(1, 2)
     return x if batched else x[0]
 
 
 def structure_energy(
-    A: torch.Tensor, X: torch.Tensor, *, lambda1: float = 0.1, centers=None, rays=None, visible=None,
-    lambda2: float | None = None,
+    A: torch.Tensor, X: torch.Tensor, *, lambda1: float = 0.1, centers: ArrayIn | None = None,
+    rays: ArrayIn | None = None, visible: ArrayIn | None = None, lambda2: float | None = None,
 ) -> torch.Tensor:  # fmt: skip
     """The DLOE objective divided by N J; without rays it is the smoothness loss (paper's l^S).
 
@@ -383,7 +409,14 @@ class DLOESolver(torch.nn.Module):
         self.method = method
         self.prior_weight = float(prior_weight)
 
-    def forward(self, A: torch.Tensor, centers, rays, visible, x_prior=None) -> torch.Tensor:
+    def forward(
+        self,
+        A: torch.Tensor,
+        centers: ArrayIn,
+        rays: ArrayIn,
+        visible: ArrayIn,
+        x_prior: ArrayIn | None = None,
+    ) -> torch.Tensor:
         """Solve for X, shape ``(N, J, 3)`` or ``(B, N, J, 3)``; see :func:`solve_structure`."""
         return solve_structure(
             A, centers, rays, visible, lambda1=self.lambda1, lambda2=self.lambda2, method=self.method,
