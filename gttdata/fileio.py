@@ -191,10 +191,14 @@ class OutputLock:
     Args:
         folder: The output folder (created).
         what: The command taking the lock, for the message.
+        shared: Take a shared lock: writers of disjoint parts (``--shard-range`` array jobs) may hold
+            it together, and they exclude every exclusive holder (a run over the whole folder).
     """
 
-    def __init__(self, folder: str | Path, what: str = "another gtt process") -> None:
-        self.folder, self.what, self._fd = Path(folder), what, None
+    def __init__(
+        self, folder: str | Path, what: str = "another gtt process", *, shared: bool = False
+    ) -> None:
+        self.folder, self.what, self.shared, self._fd = Path(folder), what, shared, None
 
     def __enter__(self) -> OutputLock:
         import fcntl
@@ -206,7 +210,7 @@ class OutputLock:
         except OSError as exc:
             raise write_error(self.folder, exc) from exc
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, (fcntl.LOCK_SH if self.shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
         except OSError as exc:
             holder = os.pread(fd, 64, 0).decode(errors="replace").split()
             os.close(fd)
@@ -218,7 +222,7 @@ class OutputLock:
                 f"{self.folder}: in use by {name} (PID {pid}); wait for it to finish or stop it, "
                 "then run again (one writer per output folder)"
             ) from None
-        os.ftruncate(fd, 0)
+        os.ftruncate(fd, 0)  # shared holders each record themselves; the last one is named
         os.pwrite(fd, f"{os.getpid()} {self.what}\n".encode(), 0)
         self._fd = fd
         return self
@@ -231,7 +235,9 @@ class OutputLock:
             self._fd = None
 
 
-def check_output(path: str | Path, *, exists: bool, resume: bool, overwrite: bool, what: str) -> None:
+def check_output(
+    path: str | Path, *, exists: bool, resume: bool, overwrite: bool, what: str, resumable: bool = True
+) -> None:
     """The CLI convention for an existing output: refuse unless ``--resume`` or ``--overwrite``.
 
     Args:
@@ -240,6 +246,7 @@ def check_output(path: str | Path, *, exists: bool, resume: bool, overwrite: boo
         resume: ``--resume`` was given (continue it).
         overwrite: ``--overwrite`` was given (replace it).
         what: What the output holds, e.g. ``"a dataset"``.
+        resumable: Whether the command has ``--resume`` (the message offers only what exists).
 
     Raises:
         OutputError: ``exists`` and neither flag, or both flags.
@@ -247,9 +254,12 @@ def check_output(path: str | Path, *, exists: bool, resume: bool, overwrite: boo
     if resume and overwrite:
         raise OutputError(f"{path}: give --resume (continue) or --overwrite (replace), not both")
     if exists and not (resume or overwrite):
-        raise OutputError(
-            f"{path}: already holds {what}; pass --resume to continue it or --overwrite to replace it"
+        ways = (
+            "pass --resume to continue it or --overwrite to replace it"
+            if resumable
+            else "pass --overwrite to replace it"
         )
+        raise OutputError(f"{path}: already holds {what}; {ways}")
 
 
 def remove_output(paths: list[Path]) -> None:
@@ -261,14 +271,15 @@ def remove_output(paths: list[Path]) -> None:
             p.unlink(missing_ok=True)
 
 
-def die_with_parent(poll_s: float = 0.5) -> None:
+def die_with_parent(parent: int | None = None, poll_s: float = 0.5) -> None:
     """Make this (worker) process exit when its parent dies, even by ``kill -9``.
 
     Linux: ``PR_SET_PDEATHSIG`` delivers SIGKILL when the parent goes. Everywhere: a daemon thread
     watches ``os.getppid()`` and exits the process when it changes (the parent was re-parented away).
-    Call it first thing in a worker (a pool initializer).
+    Call it first thing in a worker (a pool initializer), with the PID of the process that created
+    the pool: a parent killed while the worker was still starting is then noticed too.
     """
-    parent = os.getppid()
+    parent = os.getppid() if parent is None else parent
     with contextlib.suppress(Exception):
         import ctypes
         import signal

@@ -6,12 +6,16 @@ import concurrent.futures as cf
 import json
 import logging
 import multiprocessing as mp
+import os
 import queue as queue_mod
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 from gttdata import __version__
 from gttdata.errors import ManifestError, RecipeError, ShardFormatError
+from gttdata.fileio import OutputLock, check_output, die_with_parent, remove_output
 from gttdata.generate_plan import build_sample, n_samples, validate_inputs
 from gttdata.manifest import (
     MANIFEST_NAME,
@@ -135,11 +139,28 @@ def _write_block(recipe: GenerateRecipe, plan: BlockPlan, out_dir: str, attrs: d
     ) as writer:
         for i in range(plan.first_index, plan.first_index + plan.n_samples):
             group = build_sample(recipe, plan.split, i)
+            _check_usable(group[0], plan.split, i)
             writer.write(group)
             n_images += group[0].n_images
             if progress is not None:
                 progress(group[0].n_images)
     return n_images
+
+
+def _check_usable(sample, split: str, index: int) -> None:
+    """Refuse a sample no solver can use: fewer than two cameras with images, or no joint seen twice.
+
+    Generation stops with one line rather than writing a dataset of unusable samples (a one-frame
+    motion, a window shorter than a frame, or drop rates that leave nothing).
+    """
+    n_cams = len(np.unique(sample.cam_id)) if sample.n_images else 0
+    seen_twice = int((sample.visible.sum(axis=0) >= 2).sum()) if sample.n_images else 0
+    if n_cams < 2 or seen_twice == 0:
+        raise RecipeError(
+            f"splits.{split} sample {index} ({sample.motion_name}): expected images from at least 2 cameras "
+            f"with a joint seen in 2 or more, found {sample.n_images} images from {n_cams} cameras and "
+            f"{seen_twice} such joints; lengthen the motion or capture.window_s, or lower the drop rates"
+        )
 
 
 def _block_ok(out_dir: Path, plan: BlockPlan, attrs: dict, known: dict[str, str]) -> str | None:
@@ -181,8 +202,22 @@ def _check_foreign(out_dir: Path, attrs: dict) -> None:
         if found != attrs["recipe_hash"]:
             raise ManifestError(
                 f"{path}: recipe_hash: expected {attrs['recipe_hash'][:12]} (this recipe), found {str(found)[:12]}; "
-                "write each recipe to its own output directory (--out) or delete the old shards"
+                "write each recipe to its own output directory (--out), or pass --overwrite to replace the old dataset"
             )
+
+
+_PROGRESS = None  # in a worker: the queue its progress goes to (set by _worker_init)
+
+
+def _worker_init(q, parent: int) -> None:
+    """Pool initializer: exit with the parent ``parent`` (even after ``kill -9``), report progress to ``q``."""
+    global _PROGRESS
+    die_with_parent(parent)
+    _PROGRESS = q
+
+
+def _write_block_in_worker(recipe: GenerateRecipe, plan: BlockPlan, out_dir: str, attrs: dict) -> int:
+    return _write_block(recipe, plan, out_dir, attrs, _PROGRESS.put)
 
 
 def _run_blocks(recipe, todo: list[BlockPlan], out_dir: Path, attrs: dict, workers: int, bar) -> None:
@@ -195,9 +230,11 @@ def _run_blocks(recipe, todo: list[BlockPlan], out_dir: Path, attrs: dict, worke
             _write_block(recipe, plan, str(out_dir), attrs, tick)
         return
     ctx = mp.get_context("spawn")  # h5py and forked HDF5 state do not mix; spawn works everywhere
-    with ctx.Manager() as manager, cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        q = manager.Queue()
-        futures = [pool.submit(_write_block, recipe, plan, str(out_dir), attrs, q.put) for plan in todo]
+    q = ctx.Queue()  # no Manager: a manager process would outlive a killed parent
+    with cf.ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(q, os.getpid())
+    ) as pool:
+        futures = [pool.submit(_write_block_in_worker, recipe, plan, str(out_dir), attrs) for plan in todo]
         pending = set(futures)
         try:
             while pending:
@@ -261,6 +298,7 @@ def generate_dataset(
     workers: int = 1,
     shard_range: str | tuple[int, int] | None = None,
     resume: bool = False,
+    overwrite: bool = False,
     progress: bool = True,
 ) -> Manifest | None:
     """Generate the shards of ``recipe`` into ``recipe.output_dir``, then write its manifest.
@@ -277,7 +315,9 @@ def generate_dataset(
         shard_range: Blocks to write, ``"a:b"`` over :func:`plan_blocks` (for array jobs); None: all.
         resume: Keep blocks already on disk that verify (recipe hash, sample coverage, every chunk's
             Fletcher-32 checksum re-read, SHA-256 against a previous manifest when there is one);
-            regenerate the rest. Without it, blocks in range are rewritten.
+            regenerate the rest. A folder holding shards of another recipe is refused.
+        overwrite: Delete the dataset files in range first (all shards and the manifest without
+            ``shard_range``). Without ``resume`` or ``overwrite``, existing files in range are refused.
         progress: Show a tqdm progress bar (samples/s, images/s, ETA) on stderr.
 
     Returns:
@@ -288,15 +328,41 @@ def generate_dataset(
         RecipeError: Missing motion files or a bad ``shard_range``.
         ManifestError: The output directory holds shards of another recipe, or the written dataset
             does not verify.
-        OSError: Unwritable output or full disk (temporary files are removed).
+        OutputError: Existing files without ``resume``/``overwrite``; another process writing the
+            folder (a run over the whole dataset excludes all others; ``shard_range`` jobs may run
+            together); an unwritable output or a full disk (temporary files are removed).
     """
     out_dir = Path(recipe.output_dir)
     validate_inputs(recipe)
     blocks = plan_blocks(recipe)
     selected = [blocks[i] for i in parse_shard_range(shard_range, len(blocks))]
+    with OutputLock(out_dir, "gttdata generate", shared=shard_range is not None):
+        return _generate_locked(
+            recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress
+        )
+
+
+def _existing_files(out_dir: Path, selected: list[BlockPlan], whole: bool) -> list[Path]:
+    """Dataset files a run over ``selected`` would replace (all shards and the manifest when ``whole``)."""
+    if whole:
+        shards, tmps = scan_shards(out_dir)
+        manifest = [out_dir / MANIFEST_NAME] if (out_dir / MANIFEST_NAME).exists() else []
+        return shards + tmps + manifest
+    found = []
+    for plan in selected:
+        finals, tmps = _block_files(out_dir / plan.split, plan.shard_index)
+        found += finals + tmps
+    return found
+
+
+def _generate_locked(recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress):
+    whole = len(selected) == len(blocks)
+    existing = _existing_files(out_dir, selected, whole)
+    check_output(out_dir, exists=bool(existing), resume=resume, overwrite=overwrite, what="a dataset")
+    if overwrite:
+        remove_output(existing)
     attrs = storage_attrs(recipe)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    _check_foreign(out_dir, attrs)
+    _check_foreign(out_dir, attrs)  # --resume continues only a dataset of this very recipe
     known = _previous_manifest(out_dir)
     todo = []
     for plan in selected:

@@ -201,6 +201,12 @@ def _read_entry(root: Path, path: Path) -> tuple[ShardEntry, dict]:
     reader = ShardReader(path)
     try:
         attrs = reader.attrs
+        try:
+            reader.check()  # a manifest blesses only content whose chunk checksums hold
+        except ShardFormatError as exc:
+            raise ManifestError(
+                f"{exc}; not indexing it: regenerate it (gttdata generate RECIPE --out {root} --resume)"
+            ) from exc
     finally:
         reader.close()
     rel = path.relative_to(root).as_posix()
@@ -245,8 +251,10 @@ def _check_coverage(split: str, entries: list[ShardEntry], expected: int | None)
 def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
     """Index the shards under ``root/<split>/`` into a manifest (does not write it).
 
-    Every shard must carry the same recipe hash and a readable schema version, and each split's shards
-    must hold its samples ``0..n-1`` exactly once (``n`` from the recipe stored in the shards, when any).
+    Every shard must carry the same recipe hash and a readable schema version, each split's shards
+    must hold its samples ``0..n-1`` exactly once (``n`` from the recipe stored in the shards, when any),
+    and every sample must read back with valid Fletcher-32 chunk checksums: the SHA-256 values of a
+    manifest vouch only for content that was verified.
 
     Args:
         root: Dataset directory.
@@ -258,7 +266,8 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
         ``sigma_px_mean`` (mean 2-D noise std drawn per sample, pixels), from the original samples.
 
     Raises:
-        ManifestError: No shards, shards of different recipes, or samples missing or duplicated.
+        ManifestError: No shards, shards of different recipes, samples missing or duplicated, or a
+            shard whose chunk checksums fail.
         ShardFormatError: A shard that cannot be opened.
     """
     root = Path(root)

@@ -207,7 +207,7 @@ def _open_one(spec, split: str):
         from gttdata.cli import main as gttdata_main
 
         log.info("no shards under %s: generating them from %s", root, spec.generate)
-        args = ["generate", spec.generate, *spec.overrides]
+        args = ["generate", spec.generate, *spec.overrides, "--resume"]  # keeps what a killed run wrote
         if spec.root:
             args.append(f"output_dir={root}")
         gttdata_main(args, standalone_mode=False)

@@ -59,6 +59,7 @@ def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> 
 @click.option("--workers", "-j", type=click.IntRange(min=1), default=1, show_default=True, help="Processes.")
 @click.option("--shard-range", default=None, metavar="A:B", help="Write only blocks A..B-1 (array jobs).")
 @click.option("--resume", is_flag=True, help="Keep shards that verify, regenerate the rest.")
+@click.option("--overwrite", is_flag=True, help="Delete the existing dataset in the output first.")
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -88,6 +89,7 @@ def generate_cmd(
     workers: int,
     shard_range: str | None,
     resume: bool,
+    overwrite: bool,
     out: Path | None,
     register_: bool,
     preview: int,
@@ -95,6 +97,10 @@ def generate_cmd(
     as_json: bool,
 ) -> None:
     """Simulate the captures of RECIPE into HDF5 shards, then write and verify manifest.json.
+
+    An output that already holds a dataset is refused unless --resume (keep what verifies) or
+    --overwrite (start again) is given; one process writes a folder at a time (--shard-range jobs may
+    share it).
 
     \b
     Examples:
@@ -118,7 +124,12 @@ def generate_cmd(
     )
     t0 = time.perf_counter()
     manifest = generate_dataset(
-        recipe, workers=workers, shard_range=shard_range, resume=resume, progress=progress
+        recipe,
+        workers=workers,
+        shard_range=shard_range,
+        resume=resume,
+        overwrite=overwrite,
+        progress=progress,
     )
     seconds = time.perf_counter() - t0
     if manifest is None:

@@ -61,12 +61,16 @@ def motions() -> None:
 @click.option(
     "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
 )
+@click.option("--force", is_flag=True, help="Fetch every file again, even when a verified copy is cached.")
 @friendly_errors
-def fetch_cmd(dest: Path | None) -> None:
-    """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache."""
+def fetch_cmd(dest: Path | None, force: bool) -> None:
+    """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache.
+
+    Every file is checked against its known SHA-256; a damaged cached copy is fetched again.
+    """
     from gttdata.mocap.fetch import fetch_motions
 
-    paths = fetch_motions(dest, progress=click.echo)
+    paths = fetch_motions(dest, progress=click.echo, force=force)
     click.echo(f"{len(paths)} motion files in {paths[0].parent if paths else dest}")
 
 

@@ -11,6 +11,7 @@ is fetched with ``apt-get download`` into a temporary directory and unpacked wit
 from __future__ import annotations
 
 import gzip
+import hashlib
 import logging
 import os
 import shutil
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gttdata.errors import GttDataError
+from gttdata.fileio import atomic_write, file_sha256
 
 __all__ = [
     "MOTION_FILES",
@@ -43,23 +45,51 @@ class MotionFile:
         name: File name in the cache.
         package: Debian package that ships it.
         member: Path inside the package (relative to ``/``), without a ``.gz`` suffix.
+        sha256: SHA-256 of the file (decompressed); None: not checked.
     """
 
     name: str
     package: str
     member: str
+    sha256: str | None = None
 
 
 _BVH_DIR = "usr/share/assimp/models/BVH"
 _C3D_DIR = "usr/share/doc/dart/data/c3d"
 
 #: The files ``gttdata motions fetch`` provides.
+#: Checksums are those of the files in Debian 12 (bookworm): assimp-testmodels and dart-doc.
 MOTION_FILES: tuple[MotionFile, ...] = (
-    MotionFile("01_01.bvh", "assimp-testmodels", f"{_BVH_DIR}/01_01.bvh"),
-    MotionFile("01_03.bvh", "assimp-testmodels", f"{_BVH_DIR}/01_03.bvh"),
-    MotionFile("Boxing_Toes.bvh", "assimp-testmodels", f"{_BVH_DIR}/Boxing_Toes.bvh"),
-    MotionFile("nick_freeform_001.c3d", "dart-doc", f"{_C3D_DIR}/nick_freeform_001.c3d"),
-    MotionFile("squat.c3d", "dart-doc", f"{_C3D_DIR}/squat.c3d"),
+    MotionFile(
+        "01_01.bvh",
+        "assimp-testmodels",
+        f"{_BVH_DIR}/01_01.bvh",
+        "1d9ee909452ee62784306545cf1fcd634243db1173e0c90cecbed793e50361a8",
+    ),
+    MotionFile(
+        "01_03.bvh",
+        "assimp-testmodels",
+        f"{_BVH_DIR}/01_03.bvh",
+        "72d3f37de5af9adfc228dda72422cadb8cfc58d1cd8336076241ba115715c87c",
+    ),
+    MotionFile(
+        "Boxing_Toes.bvh",
+        "assimp-testmodels",
+        f"{_BVH_DIR}/Boxing_Toes.bvh",
+        "ad81c1e3bb2349cb8ea5ac5d753b8a199fce9182bf9015bcc45c2f0414bc99af",
+    ),
+    MotionFile(
+        "nick_freeform_001.c3d",
+        "dart-doc",
+        f"{_C3D_DIR}/nick_freeform_001.c3d",
+        "071a483aae9ef3d6c41061de65236a9d54ab50c10fcd0cbbf9c4720580e7fae6",
+    ),
+    MotionFile(
+        "squat.c3d",
+        "dart-doc",
+        f"{_C3D_DIR}/squat.c3d",
+        "224bdcc89e802b87b3a0f3d1d505c7d3e14e5b71e97ac5884a25be1a270a8bbd",
+    ),
 )
 
 #: Root of the installed system tree searched for packaged copies (tests point it elsewhere).
@@ -78,19 +108,37 @@ def cache_dir() -> Path:
 default_cache_dir = cache_dir
 
 
-def _copy_member(root: Path, member: str, dest: Path) -> bool:
-    """Copy ``root/member`` (or its ``.gz``, decompressed) to ``dest`` atomically; False if absent."""
-    src, gz = root / member, root / f"{member}.gz"
-    tmp = dest.with_name(dest.name + ".tmp")
-    if src.is_file():
-        shutil.copyfile(src, tmp)
-    elif gz.is_file():
-        with gzip.open(gz, "rb") as fin, tmp.open("wb") as fout:
-            shutil.copyfileobj(fin, fout)
-    else:
+def _copy_member(root: Path, f: MotionFile, dest: Path) -> bool:
+    """Copy ``root/member`` (or its ``.gz``, decompressed) to ``dest`` atomically; False if absent.
+
+    Raises:
+        GttDataError: The copy's SHA-256 differs from ``f.sha256`` (nothing is written then).
+    """
+    src, gz = root / f.member, root / f"{f.member}.gz"
+    if not (src.is_file() or gz.is_file()):
         return False
-    tmp.replace(dest)
+    digest = hashlib.sha256()
+    with atomic_write(dest, "wb") as fout:
+        with open(src, "rb") if src.is_file() else gzip.open(gz, "rb") as fin:
+            for block in iter(lambda: fin.read(1 << 20), b""):
+                digest.update(block)
+                fout.write(block)
+        if f.sha256 is not None and digest.hexdigest() != f.sha256:
+            raise GttDataError(
+                f"{src if src.is_file() else gz}: sha256: expected {f.sha256[:16]}... for {f.name}, found "
+                f"{digest.hexdigest()[:16]}... (another package version?); not cached"
+            )
     return True
+
+
+def _cached_ok(path: Path, f: MotionFile) -> str | None:
+    """Why the cached copy of ``f`` cannot be used (None when it is present and intact)."""
+    if not path.is_file():
+        return "missing"
+    if f.sha256 is None:
+        return None
+    found = file_sha256(path)
+    return None if found == f.sha256 else f"sha256 {found[:16]}..., expected {f.sha256[:16]}..."
 
 
 def _run(cmd: list[str], cwd: Path, what: str) -> None:
@@ -128,17 +176,22 @@ def fetch_motions(
     dest: str | Path | None = None,
     *,
     system_root: str | Path | None = None,
-    files: tuple[MotionFile, ...] = MOTION_FILES,
+    files: tuple[MotionFile, ...] | None = None,
     progress: Callable[[str], None] | None = None,
+    force: bool = False,
 ) -> list[Path]:
-    """Make every file of ``files`` present in ``dest``; files already there are kept (idempotent).
+    """Make every file of ``files`` present and intact in ``dest`` (idempotent).
+
+    A cached file is kept when its SHA-256 matches; a damaged one (truncated, garbage) is fetched
+    again. Every copy is checked before it is renamed into the cache.
 
     Args:
         dest: Cache directory; defaults to :func:`cache_dir`.
         system_root: Where installed packages live; defaults to :data:`SYSTEM_ROOT`.
-        files: Which files to fetch.
+        files: Which files to fetch (default :data:`MOTION_FILES`).
         progress: Called with one human-readable line per step (the CLI passes ``click.echo``);
             every line is also logged at INFO.
+        force: Fetch every file again, even when its cached copy is intact.
 
     Returns:
         Paths of all requested files in ``dest``.
@@ -156,10 +209,15 @@ def fetch_motions(
     dest.mkdir(parents=True, exist_ok=True)
     root = Path(system_root) if system_root is not None else SYSTEM_ROOT
     todo = []
+    files = MOTION_FILES if files is None else files
     for f in files:
-        if (dest / f.name).is_file():
-            say(f"{f.name}: already cached")
-        elif _copy_member(root, f.member, dest / f.name):
+        why = "--force" if force else _cached_ok(dest / f.name, f)
+        if why is None:
+            say(f"{f.name}: already cached" + (" (sha256 verified)" if f.sha256 else ""))
+            continue
+        if why not in ("missing", "--force"):
+            say(f"{f.name}: cached copy is damaged ({why}); fetching it again")
+        if _copy_member(root, f, dest / f.name):
             say(f"{f.name}: copied from the installed package {f.package} ({root / f.member})")
         else:
             todo.append(f)
@@ -168,7 +226,7 @@ def fetch_motions(
         with tempfile.TemporaryDirectory(prefix="gtt-fetch-") as tmp:
             unpacked = _unpack_package(package, Path(tmp))
             for f in (f for f in todo if f.package == package):
-                if not _copy_member(unpacked, f.member, dest / f.name):
+                if not _copy_member(unpacked, f, dest / f.name):
                     raise GttDataError(f"package {package!r} does not contain {f.member} (or {f.member}.gz)")
                 say(f"{f.name}: unpacked from {package}")
     return [dest / f.name for f in files]

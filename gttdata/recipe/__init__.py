@@ -13,6 +13,7 @@ from gttdata.errors import RecipeError
 from gttdata.recipe._parse import apply_overrides, build_dataclass, to_plain
 from gttdata.recipe.param import PARAM_KINDS, Param
 from gttdata.recipe.schema import (
+    MAX_IMAGES_PER_SAMPLE,
     AugmentSpec,
     CaptureSpec,
     FileRigSpec,
@@ -154,6 +155,29 @@ def _check_registered(recipe: GenerateRecipe, source: str) -> None:
                     )
 
 
+def _largest(p: Param) -> float:
+    """The largest value a parameter draws (a normal: mean + 4 sigma, clipped to its range)."""
+    if p.kind == "normal":
+        top = p.args[0] + 4 * p.args[1]
+        return min(top, p.hi) if p.hi is not None else top
+    return max(p.args)
+
+
+def _check_size(recipe: GenerateRecipe, source: str) -> None:
+    """One capture holds at most MAX_IMAGES_PER_SAMPLE images (cameras x frame rate x window)."""
+    cams = _largest(recipe.rig.n_cameras) if isinstance(recipe.rig, RingRigSpec) else None
+    if cams is None:
+        return  # a rig file: its camera count is checked when it is read
+    cap = recipe.capture
+    n = cams * _largest(cap.fps_hz) * _largest(cap.window_s)
+    if n > MAX_IMAGES_PER_SAMPLE:
+        raise RecipeError(
+            f"{source}: capture: expected at most {MAX_IMAGES_PER_SAMPLE} images per sample "
+            f"(rig.n_cameras x capture.fps_hz x capture.window_s), found up to {n:.3g}; "
+            "lower the frame rate or the window"
+        )
+
+
 def parse_recipe(data: dict | None, *, source: str = "<recipe>") -> GenerateRecipe:
     """Build and validate a recipe from a plain mapping (as loaded from YAML).
 
@@ -163,6 +187,7 @@ def parse_recipe(data: dict | None, *, source: str = "<recipe>") -> GenerateReci
     recipe = build_dataclass(GenerateRecipe, data, "", source)
     _check_splits(recipe, source)
     _check_registered(recipe, source)
+    _check_size(recipe, source)
     return recipe
 
 

@@ -21,6 +21,15 @@ __all__ = [
 ]
 
 
+#: Sanity bounds (refused with one line): beyond them a recipe is almost surely a typo (``1e12``), and
+#: generation would grow memory or disk for hours before failing.
+MAX_SAMPLES_PER_SPLIT = 100_000_000
+MAX_FPS_HZ = 10_000
+MAX_WINDOW_S = 3_600.0
+#: Largest number of images one capture may hold (cameras x frame rate x window).
+MAX_IMAGES_PER_SAMPLE = 100_000
+
+
 def _f(default, *, factory=None, **check):
     """A dataclass field whose ``metadata`` holds its validation rule (ge, gt, le, lt, choices, integer...)."""
     if factory is not None:
@@ -79,7 +88,7 @@ class ProceduralSource:
     count: int = _f(16, ge=1)
     seed: int = _f(0, ge=0)
     duration_s: Param = _p(6.0, gt=0)
-    fps_hz: float = _f(120.0, gt=0)
+    fps_hz: float = _f(120.0, gt=0, le=MAX_FPS_HZ)
     trim_start_s: float = _f(0.0, ge=0)
     trim_end_s: float = _f(0.0, ge=0)
     window_s: Param | None = _f(None, gt=0, param=True)
@@ -127,7 +136,7 @@ class SplitSpec:
     """
 
     name: str = _f("train", pattern=r"^[A-Za-z0-9_.-]+$")
-    n_samples: int = _f(1, ge=0)
+    n_samples: int = _f(1, ge=0, le=MAX_SAMPLES_PER_SPLIT)
     sources: tuple[ProceduralSource | FileSource, ...] = _f((), nonempty=True)
 
 
@@ -149,7 +158,7 @@ class RingRigSpec:
     """
 
     kind: str = _f("ring", choices=("ring",))
-    n_cameras: Param = _p(4, ge=1, le=64, integer=True)
+    n_cameras: Param = _p(4, ge=2, le=64, integer=True)  # one camera cannot triangulate
     radius_m: Param = _p(3.0, gt=0)
     height_m: Param = _p(1.0)
     target_height_m: Param = _p(0.9)
@@ -199,8 +208,8 @@ class CaptureSpec:
         recenter: Translate the motion window so its mean root position is above the world origin.
     """
 
-    window_s: Param = _p(2.5, gt=0)
-    fps_hz: Param = _p(30.0, gt=0, allow_list=True)
+    window_s: Param = _p(2.5, gt=0, le=MAX_WINDOW_S)
+    fps_hz: Param = _p(30.0, gt=0, le=MAX_FPS_HZ, allow_list=True)
     fps_shared: bool = False
     stagger: str = _f("even", choices=("even", "random"))
     start_spread_s: Param = _p(0.0, ge=0)
@@ -210,7 +219,7 @@ class CaptureSpec:
     sigma_px: Param = _p(2.0, ge=0)
     outlier_rate: Param = _p(0.0, ge=0, le=1)
     outlier_sigma_px: Param = _p(50.0, ge=0)
-    joint_drop_rate: Param = _p(0.0, ge=0, le=1)
+    joint_drop_rate: Param = _p(0.0, ge=0, lt=1)  # 1 would leave nothing to reconstruct
     image_drop_rate: Param = _p(0.0, ge=0, lt=1)
     recenter: bool = True
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -131,8 +132,12 @@ class ShardReader:
     def _open(self) -> None:
         try:
             f = h5py.File(self.path, "r")
-        except FileNotFoundError:
-            raise
+        except FileNotFoundError as exc:  # h5py leaves filename None: name the shard here
+            raise FileNotFoundError(
+                errno.ENOENT,
+                "shard file is missing (regenerate it: gttdata generate ... --resume)",
+                str(self.path),
+            ) from exc
         except OSError as exc:
             raise ShardFormatError(f"{self.path}: cannot open shard ({_short(exc)})") from exc
         try:

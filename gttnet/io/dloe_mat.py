@@ -21,8 +21,10 @@ def _load(path: Path) -> dict:
         return scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True)
     except FileNotFoundError:
         raise
-    except (ValueError, TypeError, OSError, NotImplementedError) as exc:
-        raise ImportFormatError(f"{path}: not a readable MATLAB .mat file (v5/v7): {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - scipy raises MatReadError, ValueError, TypeError... on bad files
+        size = path.stat().st_size if path.exists() else 0
+        found = "an empty file" if size == 0 else f"{size} bytes it cannot read ({exc})"
+        raise ImportFormatError(f"{path}: expected a MATLAB .mat file (v5/v7), found {found}") from exc
 
 
 def _struct_field(path: Path, struct: np.ndarray, name: str, *, optional: bool = False):

@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import csv
 import io
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from gttdata.fileio import write_bytes_atomic
 
 __all__ = [
     "MOTION_SUFFIXES",
@@ -165,9 +166,7 @@ def _num(v: float) -> str:
 
 
 def _atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    write_bytes_atomic(path, data)  # fsync + rename; a full disk is one line, no .tmp left
 
 
 def _trc_bytes(table: MotionTable, name: str) -> bytes:

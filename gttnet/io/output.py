@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import io
 import json
-import os
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+from gttdata.fileio import write_bytes_atomic, write_error
 from gttnet.baselines.registry import Reconstruction
 
 __all__ = ["OUTPUT_VERSION", "write_reconstruction", "read_reconstruction"]
@@ -51,7 +52,8 @@ def write_reconstruction(
 ) -> Path:
     """Write a reconstruction; the suffix picks the container (``.h5``/``.hdf5`` or ``.npz``).
 
-    Written atomically (temporary file, then rename). Contents: ``points3d`` (N, J, 3) float64 metres,
+    Written atomically (in memory, then temporary file, fsync, rename); a failed write raises one
+    :class:`~gttdata.errors.OutputError` line naming ``path``. Contents: ``points3d`` (N, J, 3) float64 metres,
     ``image_index`` (N,) int64 (stored index in the input file of each row), ``affinity`` (N, N) and
     ``order`` (N,) when the method produced them; attributes ``format_version``, ``method``,
     ``sequencing``, ``seconds``, ``units`` (``"m"``), ``n_images``, ``n_joints``, ``info`` (JSON) and
@@ -79,18 +81,22 @@ def write_reconstruction(
     for k, v in (extra or {}).items():
         arrays[k] = np.asarray(v)
     attrs.update(extra_attrs or {})
-    path.parent.mkdir(parents=True, exist_ok=True)  # --out runs/rec.h5 on a fresh checkout
-    tmp = path.with_name(path.name + ".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)  # --out runs/rec.h5 on a fresh checkout
+    except OSError as exc:
+        raise write_error(path.parent, exc) from exc
+    # Built in memory, then written in one piece: HDF5 never meets a disk error (a full disk crashed it
+    # with a segfault), and a failed write is one line naming the path, with no temporary file left.
+    buf = io.BytesIO()
     if suffix == ".npz":
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays, **{k: np.asarray(v) for k, v in attrs.items()})
+        np.savez_compressed(buf, **arrays, **{k: np.asarray(v) for k, v in attrs.items()})
     else:
-        with h5py.File(tmp, "w") as f:
+        with h5py.File(buf, "w") as f:
             for k, v in arrays.items():
                 f.create_dataset(k, data=v, compression="gzip" if v.size > 4096 else None)
             for k, v in attrs.items():
                 f.attrs[k] = v
-    os.replace(tmp, path)
+    write_bytes_atomic(path, buf.getbuffer())
     return path
 
 

@@ -143,7 +143,13 @@ def test_other_recipe_in_same_directory_is_refused(reference, tmp_path):
     line = _one_error_line(
         _run("generate", TINY, "seed=99", "--out", str(tmp_path), "--no-progress", ok=False)
     )
+    assert "already holds a dataset" in line and "--overwrite" in line
+    line = _one_error_line(
+        _run("generate", TINY, "seed=99", "--out", str(tmp_path), "--resume", "--no-progress", ok=False)
+    )
     assert "recipe_hash" in line and "own output directory" in line
+    _run("generate", TINY, "seed=99", "--out", str(tmp_path), "--overwrite", "--no-progress")
+    _run("verify", str(tmp_path), "--deep")
 
 
 def test_missing_motion_file_is_one_line(tmp_path):
