@@ -64,7 +64,7 @@ def file_sha256(path: str | Path, *, chunk: int = 1 << 20) -> str:
 
 def describe_os_error(exc: OSError) -> str:
     """``no space left on device (errno 28)``: the reason of an OS error, without its path."""
-    reason = _REASONS.get(exc.errno) or exc.strerror or str(exc)
+    reason = (_REASONS.get(exc.errno) if exc.errno is not None else None) or exc.strerror or str(exc)
     return reason + (f" (errno {exc.errno})" if exc.errno else "")
 
 
@@ -109,7 +109,7 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        with open(tmp, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as fh:
+        with open(tmp, mode, encoding=None if "b" in mode else "utf-8") as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
@@ -198,7 +198,8 @@ class OutputLock:
     def __init__(
         self, folder: str | Path, what: str = "another gtt process", *, shared: bool = False
     ) -> None:
-        self.folder, self.what, self.shared, self._fd = Path(folder), what, shared, None
+        self.folder, self.what, self.shared = Path(folder), what, shared
+        self._fd: int | None = None
 
     def __enter__(self) -> OutputLock:
         import fcntl

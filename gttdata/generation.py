@@ -217,6 +217,7 @@ def _worker_init(q, parent: int) -> None:
 
 
 def _write_block_in_worker(recipe: GenerateRecipe, plan: BlockPlan, out_dir: str, attrs: dict) -> int:
+    assert _PROGRESS is not None, "the pool initializer sets the progress queue"
     return _write_block(recipe, plan, out_dir, attrs, _PROGRESS.put)
 
 

@@ -109,9 +109,11 @@ def load_checked(path: str | Path, *, what: str = "checkpoint") -> dict:
     if not raw:
         raise ModelError(f"{path}: expected a {what}, found an empty file (0 bytes)")
     if not raw.startswith(_MAGIC):
-        payload = _unpickle(raw, path, what, weights_only=False)
+        old = _unpickle(raw, path, what, weights_only=False)
+        if not isinstance(old, dict):
+            raise ModelError(f"{path}: expected a {what} (a mapping), found {type(old).__name__}")
         log.warning("%s: %s has no checksum (written by an older gttnet); loaded unverified", path, what)
-        return payload
+        return old
     m = _HEADER_RE.match(raw[:200])
     if m is None:
         raise ModelError(
@@ -164,7 +166,7 @@ def write_model_file(path: str | Path, model: torch.nn.Module, *, card: dict | N
 
         raise write_error(path.parent, exc) from exc
     state = {k: v.detach().cpu().float() for k, v in model.state_dict().items()}
-    config = asdict(model.config)
+    config = asdict(model.config)  # type: ignore[call-overload]  # GTT-Net configs are dataclasses
     data = _torch_bytes({"format": MODEL_FORMAT, "config": config, "state_dict": state})
     with atomic_write(path, "wb") as fh:
         fh.write(data)
@@ -231,9 +233,10 @@ def read_model_file(path: str | Path) -> dict:
         cfg, state = payload.get("model_config"), payload.get("model")
     else:
         _check_card(path)
-        payload = _unpickle(_read(path), path, "GTT-Net model", weights_only=True)
-        if not isinstance(payload, dict):
-            raise ModelError(f"{path}: expected a GTT-Net model (a mapping), found {type(payload).__name__}")
+        loaded = _unpickle(_read(path), path, "GTT-Net model", weights_only=True)
+        if not isinstance(loaded, dict):
+            raise ModelError(f"{path}: expected a GTT-Net model (a mapping), found {type(loaded).__name__}")
+        payload = loaded
         cfg, state = (
             payload.get("config", payload.get("model_config")),
             payload.get("state_dict", payload.get("model")),

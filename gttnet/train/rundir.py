@@ -77,8 +77,8 @@ def open_run(
             raise OutputError(f"--resume {resume} and --out {out}: give one run directory")
         out = Path(resume)
         if recipe is None:
-            payload = load_checkpoint(out)
-            return parse_train_recipe(payload["recipe"]), payload, out
+            saved_run = load_checkpoint(out)
+            return parse_train_recipe(saved_run["recipe"]), saved_run, out
         resume = True
     if recipe is None:
         raise ValueError("train() needs a recipe or a run directory to resume")
@@ -91,7 +91,7 @@ def open_run(
     if overwrite:
         remove_output([run_dir / name for name in RUN_FILES])
         return recipe, None, run_dir
-    payload = None
+    payload: dict | None = None
     if resume and (run_dir / CHECKPOINT_NAME).is_file():
         payload = load_checkpoint(run_dir)
         saved = recipe_to_dict(parse_train_recipe(payload["recipe"]))

@@ -98,7 +98,7 @@ def test_second_writer_is_refused_naming_the_holder(tmp_path):
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to find the workers")
 def test_workers_die_with_their_parent(tmp_path):
-    """kill -9 of the parent of a --workers 2 run left its workers running."""
+    """Reproduction: ``kill -9`` of the parent of a ``--workers 2`` run left its workers running."""
     out = tmp_path / "d"
     proc = _start(
         "generate", TINY, "splits.0.n_samples=400", "--out", str(out), "--workers", "2", "--no-progress"
@@ -118,8 +118,10 @@ def test_workers_die_with_their_parent(tmp_path):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_kill_9_at_a_random_point_then_resume_is_bit_identical(tmp_path, tiny_data, seed):
-    """A real ``kill -9`` lands at a seeded random point of the writing; ``--resume`` then gives the
-    bytes of an uninterrupted run and a dataset that verifies deeply."""
+    """A real ``kill -9`` at a seeded random point, then ``--resume``: an uninterrupted run's bytes.
+
+    The resumed dataset also passes ``verify --deep``.
+    """
     from click.testing import CliRunner
 
     from gttdata.cli import main
