@@ -308,9 +308,11 @@ def ring_rig(
     for i in range(n_cameras):
         az = np.deg2rad(start_angle_deg + 360.0 * i / n_cameras)
         if jitter_deg:
+            assert rng is not None  # checked above
             az += np.deg2rad(rng.normal(0.0, jitter_deg))
         eye = np.array([tgt[0] + radius_m * np.cos(az), tgt[1] + radius_m * np.sin(az), height_m])
         if jitter_m:
+            assert rng is not None  # checked above
             eye = eye + rng.normal(0.0, jitter_m, size=3)
         cams.append(Camera(K=K.copy(), cam_from_world=look_at(eye, tgt), image_size=(w, h), name=f"cam_{i}"))
     return CameraRig(tuple(cams))

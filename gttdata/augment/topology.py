@@ -135,7 +135,7 @@ def marker_map(sk: Skeleton, rng: np.random.Generator, *, max_frac: float = 0.25
     a skin marker placed near, not on, the joint centre. Markers stay on the bone axes.
     """
     J = sk.n_joints
-    first_child = {}
+    first_child: dict[int, int] = {}
     for i, p in enumerate(sk.parents):
         if p >= 0:
             first_child.setdefault(p, i)

@@ -201,7 +201,8 @@ def write_keypoints(kp: Keypoints2D, path: str | Path, fmt: str) -> Path:
     ``coco``: one ``.json`` results file).
     """
     reg = _registry()
-    if fmt not in reg or reg[fmt].write is None:
+    write = reg[fmt].write if fmt in reg else None
+    if write is None:
         writable = ", ".join(k for k, v in reg.items() if v.write is not None)
         raise ValueError(f"cannot write keypoint format {fmt!r}; writable: {writable}")
-    return reg[fmt].write(kp, Path(path))
+    return write(kp, Path(path))

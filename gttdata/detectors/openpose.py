@@ -66,8 +66,9 @@ def read_openpose(folder: Path) -> Keypoints2D:
     files = sorted(folder.glob("*.json"))
     if not files:
         raise KeypointFormatError(f"{folder}: no OpenPose *.json files in the folder")
-    numbers = [frame_number(f.name) for f in files]
-    if any(n is None for n in numbers) or len(set(numbers)) != len(numbers):
+    parsed = [frame_number(f.name) for f in files]
+    numbers = [n for n in parsed if n is not None]
+    if len(numbers) != len(parsed) or len(set(numbers)) != len(numbers):
         numbers = list(range(len(files)))
     order = np.argsort(numbers, kind="stable")
     rows: list[np.ndarray | None] = []

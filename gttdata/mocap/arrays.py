@@ -17,6 +17,7 @@ import logging
 import math
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -166,7 +167,7 @@ def save_motion(motion: Motion, path: str | Path) -> Path:
     """
     path = Path(path)
     sk = motion.skeleton
-    fields = {
+    fields: dict[str, Any] = {
         "positions": motion.positions,
         "fps_hz": np.float64(motion.fps_hz),
         "joint_names": np.array(sk.joint_names, dtype=str),

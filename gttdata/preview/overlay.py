@@ -342,7 +342,7 @@ def write_video(
     V = sample.n_cameras
     panel_px += panel_px % 2
     size = (V * panel_px, panel_px + 32)
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), size)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), size)
     if not writer.isOpened():
         raise OSError(f"{path}: OpenCV cannot write an mp4v video here")
     windows = crop_windows(sample) if crop else [None] * V

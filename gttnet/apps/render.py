@@ -124,7 +124,7 @@ def _camera_video(path: Path, rows, proj, det, err, frames, name, size, bones, f
     scale = width_px / float(np.max(hi - lo))
     W = int(round(width_px)) // 2 * 2
     H = W + 32
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (W, H))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (W, H))
     if not writer.isOpened():
         raise OSError(f"{path}: OpenCV cannot write an mp4v video here")
     try:
@@ -180,7 +180,7 @@ def _animation(path: Path, points, order, skeleton, fps: float, max_frames: int)
     except (PreviewDependencyError, RendererUnavailableError) as exc:
         log.warning("3-D animation skipped: %s", exc)
         return None
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (size[0], size[1]))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (size[0], size[1]))
     try:
         for k, n in enumerate(take):
             rgb = first if k == 0 else render_view(points[n], skeleton, K, T, size)

@@ -145,6 +145,8 @@ def spectral_clusters(A: np.ndarray, k: int, *, seed: int = 0, n_init: int = 10)
         cost = float(((U - cent[lab]) ** 2).sum())
         if cost < best_cost:
             best, best_cost = lab, cost
+    if best is None:
+        raise ValueError(f"spectral clustering needs n_init >= 1, got {n_init}")
     return _relabel_by_size(best)
 
 

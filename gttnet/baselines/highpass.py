@@ -178,13 +178,13 @@ def _cross_validate(
     elif search == "bracket":
         for lam in LAMBDAS[::2]:
             score(lam)
-        best = LAMBDAS.index(min(cv, key=cv.get))
+        best = LAMBDAS.index(min(cv, key=cv.__getitem__))
         for i in (best - 1, best + 1):
             if 0 <= i < len(LAMBDAS) and LAMBDAS[i] not in cv:
                 score(LAMBDAS[i])
     else:
         raise ValueError(f"hpf: search must be 'grid' or 'bracket', got {search!r}")
-    return min(cv, key=cv.get), dict(sorted(cv.items()))
+    return min(cv, key=cv.__getitem__), dict(sorted(cv.items()))
 
 
 @register_method(

@@ -139,10 +139,10 @@ def _cross_validate(
             X = np.einsum("nk,jka->nja", theta[test, :k], _solve(M, b, k, ridge))
             err += float(np.nansum(ray_residuals(X, centers[test], rays[test], visible[test])))
         cv[k] = err / count
-        best = min(cv, key=cv.get)
+        best = min(cv, key=cv.__getitem__)
         if sum(1 for q in cv if q > best) >= patience:
             break
-    return min(cv, key=cv.get), cv
+    return min(cv, key=cv.__getitem__), cv
 
 
 @register_method("dct", requires="full", needs="timestamps", summary="DCT trajectory basis (Park et al.)")

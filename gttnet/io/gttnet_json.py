@@ -139,7 +139,7 @@ def skeleton_from_limbs(limbs: np.ndarray, n_joints: int) -> Skeleton:
                     parents[k] = i
                     queue.append(k)
     tree = {frozenset((i, p)) for i, p in enumerate(parents) if p >= 0}
-    extra = tuple(tuple(sorted(e)) for e in sorted(tuple(sorted(e)) for e in want - tree))
+    extra = tuple((a, b) for a, b in sorted(tuple(sorted(e)) for e in want - tree))
     return Skeleton(
         name=f"limbs{n_joints}",
         joint_names=tuple(f"j{i}" for i in range(n_joints)),

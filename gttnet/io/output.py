@@ -89,7 +89,7 @@ def write_reconstruction(
     # with a segfault), and a failed write is one line naming the path, with no temporary file left.
     buf = io.BytesIO()
     if suffix == ".npz":
-        np.savez_compressed(buf, **arrays, **{k: np.asarray(v) for k, v in attrs.items()})
+        np.savez_compressed(buf, **{**arrays, **{k: np.asarray(v) for k, v in attrs.items()}})
     else:
         with h5py.File(buf, "w") as f:
             for k, v in arrays.items():

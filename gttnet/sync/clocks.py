@@ -8,6 +8,7 @@ import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -46,9 +47,9 @@ def per_camera_rates(
             raise GttNetError(f"fps: no frame rate for camera {missing[0]} (rates given for {sorted(fps)})")
         rates = {c: float(fps[c]) for c in cams}
     elif np.ndim(fps) == 0:
-        rates = dict.fromkeys(cams, float(fps))
+        rates = dict.fromkeys(cams, float(cast(float, fps)))
     else:
-        seq = [float(x) for x in fps]
+        seq = [float(x) for x in cast(Sequence[float], fps)]
         if cams and cams[-1] >= len(seq):
             raise GttNetError(f"fps: {len(seq)} rates given, expected one per camera id 0..{cams[-1]}")
         rates = {c: seq[c] for c in cams}

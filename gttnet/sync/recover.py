@@ -320,6 +320,7 @@ class _Refiner:
             a, b = self.s[i], self.s[j]
             size = a.tau.shape[0] * a.rays.shape[2]
             if only is not None and only not in (i, j):
+                assert base is not None  # `only` comes with the residuals at the other parameters
                 out.append(base[pos : pos + size])
                 pos += size
                 continue

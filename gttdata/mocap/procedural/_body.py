@@ -190,6 +190,7 @@ def forward_kinematics(angles: np.ndarray, offsets: np.ndarray, parents: tuple[i
             glob[i] = local[i]
             continue
         g = glob[p]
+        assert g is not None  # parents come before their children
         off = offsets[i]
         pos[i] = pos[p] + g[:, 0] * off[0] + g[:, 1] * off[1] + g[:, 2] * off[2]
         if i in has_child:

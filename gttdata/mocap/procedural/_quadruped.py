@@ -184,8 +184,8 @@ def generate_quadruped_motion(
     body_lat = _dir(heading + np.pi / 2, np.zeros(T))
     chest_lat = _dir(chest_yaw + np.pi / 2, np.zeros(T))
     cycle = freq * t
-    legs = (("left", "front", 1.0, offsets[0]), ("right", "front", -1.0, offsets[1]))
-    legs += (("left", "hind", 1.0, offsets[2]), ("right", "hind", -1.0, offsets[3]))
+    legs = [("left", "front", 1.0, offsets[0]), ("right", "front", -1.0, offsets[1])]
+    legs += [("left", "hind", 1.0, offsets[2]), ("right", "hind", -1.0, offsets[3])]
     for side, end, sign, off in legs:
         front = end == "front"
         base = (
