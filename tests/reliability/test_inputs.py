@@ -48,22 +48,13 @@ def test_reconstruct_out_refuses_an_existing_file(tiny_data, tmp_path):
 
 def test_reconstruct_full_disk_is_one_line(tiny_data, small_fs):
     """It segfaulted (exit 139) and left a .tmp file on a full disk."""
-    from tests.reliability.conftest import cli
-
     (small_fs / "filler").write_bytes(b"\0" * (2 * 1024 * 1024 - 8192))
     out = small_fs / "rec.h5"
-    res = cli(
-        "gttnet",
-        "reconstruct",
-        str(tiny_data / "train/shard-00000.h5"),
-        "--method",
-        "pseudo",
-        "--out",
-        str(out),
-    )
+    shard = str(tiny_data / "train/shard-00000.h5")
+    res = CliRunner().invoke(gttnet_main, ["reconstruct", shard, "--method", "pseudo", "--out", str(out)])
     line = one_line_error(res)
     assert str(out) in line and "no space left" in line
-    assert not [p for p in small_fs.iterdir() if p.name.endswith(".tmp")]
+    assert not out.exists() and not [p for p in small_fs.iterdir() if p.name.endswith(".tmp")]
 
 
 def _files(tmp_path, content=b"real motion bytes\n"):

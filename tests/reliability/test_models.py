@@ -109,12 +109,18 @@ _OVER = ["data.sources=[{generate: recipes/gttdata/tiny.yaml, max_train: 1, max_
 
 
 def _interrupted_run(tmp_path):
-    from gttnet.train.loop import train
-    from gttnet.train.recipe import load_train_recipe
+    """A run folder as an interrupted ``gttnet train`` leaves it: a checkpoint of the resolved recipe."""
+    from gttnet.train.recipe import load_train_recipe, recipe_to_dict
 
     recipe = load_train_recipe("recipes/gttnet/tiny.yaml", _OVER)
-    train(recipe, out=tmp_path / "r", max_steps=1, progress=False)
-    return tmp_path / "r"
+    model = build_model(recipe.model.builder, **recipe.model.settings)
+    opt = torch.optim.Adam(model.parameters())
+    run = tmp_path / "r"
+    run.mkdir()
+    save_checkpoint(
+        run, model=model, optimizer=opt, state=LoopState(global_step=1), recipe=recipe_to_dict(recipe)
+    )
+    return run
 
 
 def test_resume_refuses_a_run_of_another_recipe(tmp_path):
