@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gttdata.capture.sample import CaptureSample, affinity_from_neighbours
+from gttdata.errors import RigError
 from gttdata.skeleton import Skeleton
 
 __all__ = ["SEQUENCING", "Observations", "GroundTruth", "make_view"]
@@ -76,6 +77,15 @@ class Observations:
             raise ValueError(f"stream_time_s must have shape ({n},), got {np.shape(self.stream_time_s)}")
         if self.confidence is not None and np.shape(self.confidence) != (n, j):
             raise ValueError(f"confidence must have shape ({n}, {j}), got {np.shape(self.confidence)}")
+        for name in ("K", "cam_from_world"):  # NaN cameras used to surface as "no triangulable joint"
+            value = np.asarray(getattr(self, name), dtype=np.float64)
+            bad = ~np.isfinite(value.reshape(len(value), -1)).all(axis=1) if value.size else np.zeros(0, bool)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise RigError(
+                    f"cameras: {name}: expected finite values for every image, found NaN or inf in "
+                    f"{int(bad.sum())} of {len(bad)} images (first: image {i}, camera {int(self.cam_id[i])})"
+                )
 
     def weights(self) -> np.ndarray:
         """Per-observation weight, shape ``(N, J)``: the confidence where given, else 1; 0 where missing."""

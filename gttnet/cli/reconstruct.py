@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from gttdata.cli import friendly_errors
+from gttdata.errors import RigError
 
 __all__ = ["register", "reconstruct_cmd"]
 
@@ -240,6 +241,8 @@ def _resolve_input(
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
+    except RigError as exc:  # bad cameras in the file: name it
+        raise click.ClickException(f"{input_paths[0]}: {exc}") from exc
     return {
         "loaded": loaded,
         "view": view_of_loaded(loaded),

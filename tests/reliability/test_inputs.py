@@ -95,3 +95,21 @@ def test_motions_fetch_refuses_a_source_with_the_wrong_checksum(tmp_path, monkey
     line = one_line_error(CliRunner().invoke(gttdata_main, ["motions", "fetch", "--dest", str(cache)]))
     assert "sha256" in line and "walk.bvh" in line
     assert not list(cache.iterdir()), "nothing unverified enters the cache"
+
+
+def test_nan_camera_centres_are_named(tmp_path):
+    """NaN camera centres were reported as 'no triangulable joint'."""
+    import json
+
+    from gttdata.generate_plan import build_sample
+    from gttdata.recipe import load_recipe
+    from gttnet.io.gttnet_json import write_gttnet_json
+    from tests.reliability.conftest import TINY
+
+    path = write_gttnet_json(build_sample(load_recipe(TINY), "test", 0)[0], tmp_path / "cap.json")
+    d = json.loads(path.read_text())
+    d["C"][0][3] = float("nan")  # image 3's camera centre, x
+    path.write_text(json.dumps(d))
+    line = one_line_error(CliRunner().invoke(gttnet_main, ["reconstruct", str(path), "--method", "pseudo"]))
+    assert "cap.json" in line and "cam_from_world" in line and "image" in line
+    assert "triangulable" not in line
