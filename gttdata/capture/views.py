@@ -79,12 +79,12 @@ class Observations:
             raise ValueError(f"confidence must have shape ({n}, {j}), got {np.shape(self.confidence)}")
         for name in ("K", "cam_from_world"):  # NaN cameras used to surface as "no triangulable joint"
             value = np.asarray(getattr(self, name), dtype=np.float64)
-            bad = ~np.isfinite(value.reshape(len(value), -1)).all(axis=1) if value.size else np.zeros(0, bool)
+            bad = np.asarray(~np.isfinite(value.reshape(value.shape[0], -1)).all(axis=1), dtype=bool)
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
                 raise RigError(
                     f"cameras: {name}: expected finite values for every image, found NaN or inf in "
-                    f"{int(bad.sum())} of {len(bad)} images (first: image {i}, camera {int(self.cam_id[i])})"
+                    f"{int(bad.sum())} of {bad.shape[0]} images (first: image {i}, camera {int(self.cam_id[i])})"
                 )
 
     def weights(self) -> np.ndarray:
