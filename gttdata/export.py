@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import tomli_w
@@ -67,7 +68,8 @@ def camera_rig_of(sample: CaptureSample) -> CameraRig:
                 f"sample {sample.name!r}, variant {sample.variant!r}: camera {v} moves between images; "
                 "export the 'orig' variant"
             )
-        size = tuple(int(x) for x in sample.image_size[v])
+        w, h = (int(x) for x in sample.image_size[v])
+        size = (w, h)
         cams.append(
             Camera(K=K[0], cam_from_world=T[0], image_size=size, name=f"cam_{v}", dist=tuple(dist[v]))
         )
@@ -142,16 +144,18 @@ def export_capture(
         ts_path = out / f"{cam.name}_timestamps.csv"
         _write_text(ts_path, "".join(f"frame,{x:.9f}\n" for x in t))
         fps = sample.meta.get("capture", {}).get("fps_hz", [None] * sample.n_cameras)[v]
-        entry = {"name": cam.name, "keypoints": target.name, "timestamps": ts_path.name}
+        entry: dict[str, str | float] = {
+            "name": cam.name,
+            "keypoints": target.name,
+            "timestamps": ts_path.name,
+        }
         if fps:
             entry["nominal_fps"] = float(fps)
         cameras.append(entry)
         gt_rows[cam.name] = (frame, sample.points3d[idx])
-    np.savez_compressed(
-        out / "ground_truth.npz",
-        **{f"{k}_frame": f for k, (f, _) in gt_rows.items()},
-        **{f"{k}_points3d": x for k, (_, x) in gt_rows.items()},
-    )
+    gt_arrays: dict[str, Any] = {f"{k}_frame": f for k, (f, _) in gt_rows.items()}
+    gt_arrays.update({f"{k}_points3d": x for k, (_, x) in gt_rows.items()})
+    np.savez_compressed(out / "ground_truth.npz", **gt_arrays)
     project = {
         "calibration": "calibration.toml",
         "calibration_units": units,

@@ -348,6 +348,7 @@ class Recording:
             kps.append(kp)
             times.append(t)
             fps.append(rate)
+        assert joint_names is not None  # set by the first camera; a project has at least one
         sk = _skeleton(joint_names, spec.skeleton, kps[0].keypoint_set)
         return cls(
             rig=CameraRig(tuple(cams)),
@@ -403,18 +404,17 @@ class Recording:
                 "cameras with their own clocks give 'partial'"
             )
         thr = float(self.extra.get("min_confidence", 0.1) if min_confidence is None else min_confidence)
-        px, conf, cam, frame, times = [], [], [], [], []
+        parts: tuple[list[np.ndarray], ...] = ([], [], [], [], [])  # px, conf, cam, frame, times
         for v, (kp, cam_v) in enumerate(zip(self.keypoints, self.rig.cameras, strict=True)):
             xy = undistort_points(kp.xy, cam_v) if undistort else kp.xy
             ok = np.isfinite(kp.score) & (kp.score >= thr) & np.all(np.isfinite(xy), axis=-1)
-            px.append(np.where(ok[..., None], xy, np.nan))
-            conf.append(np.where(ok, kp.score, 0.0))
-            cam.append(np.full(kp.n_frames, v))
-            frame.append(kp.frame)
             t = self.stream_time_s[v]
-            times.append(np.full(kp.n_frames, np.nan) if t is None else t)
-        px, conf = np.concatenate(px), np.concatenate(conf)
-        cam, frame, times = np.concatenate(cam), np.concatenate(frame), np.concatenate(times)
+            for part, value in zip(parts, (
+                np.where(ok[..., None], xy, np.nan), np.where(ok, kp.score, 0.0), np.full(kp.n_frames, v),
+                kp.frame, np.full(kp.n_frames, np.nan) if t is None else t,
+            ), strict=True):  # fmt: skip
+                part.append(value)
+        px, conf, cam, frame, times = (np.concatenate(part) for part in parts)
         vis = conf > 0
         keep = np.arange(cam.shape[0])  # images without any detection stay: they still have a time
         if seq == "full":

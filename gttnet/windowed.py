@@ -189,8 +189,10 @@ def subset_observations(obs: Observations, idx: np.ndarray) -> tuple[Observation
     """
     idx = np.asarray(idx, dtype=np.int64)
     if obs.sequencing == "partial":
+        assert obs.stream_index is not None  # a partial view carries its stream order
         rows = idx[np.lexsort((obs.stream_index[idx], obs.cam_id[idx]))]
     elif obs.sequencing == "full":
+        assert obs.timestamp_s is not None  # a full view carries its timestamps
         rows = idx[np.argsort(obs.timestamp_s[idx], kind="stable")]
     else:
         rows = np.sort(idx)

@@ -55,7 +55,7 @@ def drop_images(
         Kept mask of shape ``(N,)`` bool.
     """
     cam = np.asarray(cam_id)
-    keep = rng.random(cam.shape[0]) >= rate
+    keep = np.asarray(rng.random(cam.shape[0]) >= rate)
     for v in np.unique(cam):
         idx = np.flatnonzero(cam == v)
         short = min(min_per_camera, idx.size) - int(keep[idx].sum())

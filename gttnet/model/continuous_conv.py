@@ -85,6 +85,7 @@ class ContinuousConv(nn.Module):
         slots = torch.bmm(patch.reshape(n, k1 * 3, p_in), w_joint / p_in).view(n, k1, 3, self.out_points)
         # The slot MLP's first layer is linear in rel = x[m_s] - x[n]: apply it once per image, then gather.
         first, act, second = self.slot_mlp
+        assert isinstance(first, nn.Linear)  # _mlp builds Linear, activation, Linear
         y = torch.nn.functional.linear(x.reshape(n, 3 * p_in), first.weight[:, : 3 * p_in])  # (N, H)
         h = y.index_select(0, flat).view(n, k1, -1) - y[:, None] + first.bias
         if self.slot_rank:  # the one-hot rank input adds column s of its weights to slot s

@@ -26,7 +26,7 @@ import io
 import json
 import logging
 import re
-from dataclasses import asdict
+from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
 import torch
@@ -144,6 +144,16 @@ def card_path(model_path: str | Path) -> Path:
     return Path(model_path).with_suffix(".json")
 
 
+def model_config_dict(model: torch.nn.Module) -> dict:
+    """``model.config`` (a dataclass instance) as a plain dict, for model and checkpoint files."""
+    cfg = getattr(model, "config", None)
+    if cfg is None or not is_dataclass(cfg) or isinstance(cfg, type):
+        raise ModelError(
+            f"{type(model).__name__}.config must be a dataclass instance, got {type(cfg).__name__}"
+        )
+    return asdict(cfg)
+
+
 def write_model_file(path: str | Path, model: torch.nn.Module, *, card: dict | None = None) -> Path:
     """Write a model file (float32 CPU weights + config) and its card with the file's SHA-256.
 
@@ -166,7 +176,7 @@ def write_model_file(path: str | Path, model: torch.nn.Module, *, card: dict | N
 
         raise write_error(path.parent, exc) from exc
     state = {k: v.detach().cpu().float() for k, v in model.state_dict().items()}
-    config = asdict(model.config)  # type: ignore[call-overload]  # GTT-Net configs are dataclasses
+    config = model_config_dict(model)
     data = _torch_bytes({"format": MODEL_FORMAT, "config": config, "state_dict": state})
     with atomic_write(path, "wb") as fh:
         fh.write(data)

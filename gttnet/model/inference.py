@@ -179,7 +179,9 @@ def _given_order(obs: Observations, affinity: np.ndarray) -> np.ndarray:
     affinity's spectral order made to agree with every stream.
     """
     if obs.sequencing == "full":
+        assert obs.timestamp_s is not None  # a full view carries its timestamps
         return timestamp_order(obs.timestamp_s)
+    assert obs.stream_index is not None  # a partial view carries its stream order
     return stream_consistent_order(spectral_order(affinity), obs.cam_id, obs.stream_index)
 
 

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from gttdata.capture.views import Observations
+
+if TYPE_CHECKING:
+    from gttnet.geometry.candidates import CandidatePseudoTriangulation
+    from gttnet.geometry.triangulation import PseudoTriangulation
 
 __all__ = ["SequenceInput", "prepare_inputs", "random_rotation"]
 
@@ -123,6 +128,7 @@ def prepare_inputs(
     rays = obs.rays()
     from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
 
+    pt: CandidatePseudoTriangulation | PseudoTriangulation
     if use_candidate_search(obs.sequencing, obs.n_images, candidates):
         pt = candidate_pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
         nbr = pt.neighbours(k)
@@ -139,8 +145,10 @@ def prepare_inputs(
         )
     chain = None
     if obs.sequencing == "partial":
+        assert obs.stream_index is not None  # a partial view carries its stream order
         chain = torch.as_tensor(np.asarray(chain_affinity(obs.cam_id, obs.stream_index)), dtype=dtype)
     elif obs.sequencing == "full":
+        assert obs.timestamp_s is not None  # a full view carries its timestamps
         chain = torch.as_tensor(temporal_interpolation_affinity(obs.timestamp_s, obs.cam_id), dtype=dtype)
     x_init = np.nan_to_num(np.asarray(pt.X_init, dtype=np.float64))
     return SequenceInput(

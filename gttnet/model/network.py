@@ -119,6 +119,8 @@ class GTTNet(nn.Module):
             :func:`gttnet.solvers.xstep.solve_structure`.
     """
 
+    config: GTTNetConfig
+
     def __init__(self, config: GTTNetConfig, *, solver: Callable[..., torch.Tensor] | None = None) -> None:
         super().__init__()
         self.config = config

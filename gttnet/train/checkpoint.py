@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from gttnet.errors import ModelError
-from gttnet.model.files import CHECKPOINT_FORMAT, load_checked, save_checked
+from gttnet.model.files import CHECKPOINT_FORMAT, load_checked, model_config_dict, save_checked
 
 __all__ = [
     "LoopState",
@@ -94,7 +94,7 @@ def save_checkpoint(
     payload = {
         "format": CHECKPOINT_FORMAT,
         "model": model.state_dict(),
-        "model_config": asdict(model.config),
+        "model_config": model_config_dict(model),
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
         "rng": rng_states(),
