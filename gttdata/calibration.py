@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import tomllib
 from pathlib import Path
+from typing import overload
 
 import cv2
 import numpy as np
@@ -161,11 +162,17 @@ def read_toml_calibration(path: str | Path, *, units: str | None = None) -> tupl
             spread,
             units,
         )
-    units = units or stated
-    return _scaled(rig, CALIBRATION_UNITS[units]), units
+    resolved = units or stated
+    assert resolved is not None  # detected above when neither was given
+    return _scaled(rig, CALIBRATION_UNITS[resolved]), resolved
 
 
+@overload
+def _fs_mat(fs: cv2.FileStorage, key: str, path: Path) -> np.ndarray: ...
+@overload
+def _fs_mat(fs: cv2.FileStorage, key: str, path: Path, required: bool) -> np.ndarray | None: ...
 def _fs_mat(fs: cv2.FileStorage, key: str, path: Path, required: bool = True) -> np.ndarray | None:
+    """Matrix (or scalar, as a 1-vector) at ``key`` of an OpenCV YAML file; None if absent and not required."""
     node = fs.getNode(key)
     if node.empty():
         if required:

@@ -9,6 +9,7 @@ import logging
 import os
 import sys
 from types import ModuleType
+from typing import Any
 
 from gttdata.errors import PreviewDependencyError, RendererUnavailableError
 
@@ -27,7 +28,7 @@ _INSTALL_HINT = "install the preview extra: pip install 'gtt[preview]'"
 
 # The process-wide renderer: (pyrender module, OffscreenRenderer, backend name), or the error that
 # prevented it. Creating a GL context costs ~0.4 s on llvmpipe, so it is made once and reused.
-_STATE: dict[str, object] = {}
+_STATE: dict[str, Any] = {}  # pyrender module, its renderer (both untyped), backend name, error
 
 
 def require(name: str) -> ModuleType:
@@ -103,7 +104,7 @@ def _release() -> None:
             pass
 
 
-def offscreen_renderer(width: int, height: int) -> tuple[ModuleType, object]:
+def offscreen_renderer(width: int, height: int) -> tuple[ModuleType, Any]:
     """The process-wide pyrender module and OffscreenRenderer, resized to ``width`` x ``height``.
 
     The first call picks the backend: the user's ``PYOPENGL_PLATFORM`` when set, else EGL, then OSMesa.

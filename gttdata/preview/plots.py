@@ -37,7 +37,7 @@ def _figure(width_in: float, height_in: float):
     return Figure(figsize=(width_in, height_in), dpi=_DPI, layout="constrained")
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, format="png")
@@ -147,8 +147,12 @@ def collect_statistics(source: SampleSource, *, max_samples: int = 1000, progres
     from tqdm import tqdm
 
     n = len(source)
-    idx = np.unique(np.linspace(0, n - 1, min(n, max_samples)).round().astype(int)) if n else []
-    sigma, missing, n_images, duration, motions = [], [], [], [], Counter()
+    idx = np.unique(np.linspace(0, n - 1, min(n, max_samples)).round().astype(int)) if n else np.zeros(0, int)
+    sigma: list[float] = []
+    missing: list[float] = []
+    n_images: list[int] = []
+    duration: list[float] = []
+    motions: Counter[str] = Counter()
     for i in tqdm(idx, desc="statistics", unit="sample", disable=not progress, file=sys.stderr):
         s = source.read_sample(int(i))
         sigma.extend(np.ravel(s.meta.get("capture", {}).get("sigma_px", [])).astype(float).tolist())

@@ -156,7 +156,7 @@ def _skeleton_meshes(
 ) -> list:
     """Joint spheres (instanced) and bone cylinders, one mesh per colour (``_style.joint_rgb``)."""
     p = np.asarray(points3d, dtype=np.float64)
-    ok = np.isfinite(p).all(axis=1)
+    ok = np.asarray(np.isfinite(p).all(axis=1))
     jrgb, brgb = joint_rgb(skeleton), bone_rgb(skeleton)
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=joint_radius_m)
     meshes = []
@@ -337,7 +337,8 @@ def render_sample_3d(sample: CaptureSample, *, tile_px: int = 320, time_s: float
         if not len(idx):
             continue
         n = int(idx[np.argmin(np.abs(sample.timestamp_s[idx] - t))])
-        size = tuple(int(x) for x in sample.image_size[v])
+        w, h = (int(x) for x in sample.image_size[v])
+        size = (w, h)
         s = tile_px / max(size)
         img = render_view(
             sample.points3d[n], sample.skeleton, sample.K[n], sample.cam_from_world[n], size, scale=s

@@ -282,12 +282,12 @@ def read_c3d_points(path: str | Path) -> tuple[tuple[str, ...], np.ndarray, np.n
         r = c3d.Reader(h)
         labels = tuple(str(s).strip() for s in r.point_labels)
         units = r.get("POINT:UNITS").string_value.strip()
-        pts = []
+        frames = []
         for _, p, _ in r.read_frames():
             X = p[:, :3].astype(np.float64)
             X[p[:, 3] < 0] = np.nan
-            pts.append(X)
-        pts = np.stack(pts)
+            frames.append(X)
+        pts = np.stack(frames)
         param = r.get("GTT:TIME_S")
         if param is not None:
             t = np.asarray(param.float_array, dtype=np.float64).ravel()
