@@ -160,3 +160,19 @@ def test_resume_continues_and_overwrite_replaces(tmp_path):
     assert res.exit_code == 0, res.output
     logs = [json.loads(x) for x in (tmp_path / "r/log.jsonl").read_text().splitlines()]
     assert [r["seed"] for r in logs if r["kind"] == "meta"] == [5]
+
+
+def test_checkpoint_on_a_full_disk_is_one_line_and_keeps_the_old_one(run_dir, small_fs):
+    """A full disk while checkpointing: one line naming the file; the previous checkpoint survives."""
+    from gttdata.errors import OutputError
+
+    run = small_fs / "run"
+    run.mkdir()
+    (run / "checkpoint.pt").write_bytes((run_dir / "checkpoint.pt").read_bytes())
+    (small_fs / "filler").write_bytes(b"\0" * (2 * 1024 * 1024 - 64 * 1024))
+    model = build_model("gttnet_base", n_joints=31)  # larger than the space left
+    with pytest.raises(OutputError, match=r"checkpoint.pt: cannot write: no space left on device"):
+        save_checkpoint(run, model=model, optimizer=torch.optim.Adam(model.parameters()),
+                        state=LoopState(global_step=9), recipe={"name": "x"})  # fmt: skip
+    assert load_checkpoint(run)["state"].global_step == 3
+    assert not [p for p in run.iterdir() if p.name.endswith(".tmp")]
