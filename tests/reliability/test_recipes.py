@@ -37,3 +37,24 @@ def test_one_frame_capture_is_refused_not_written(tmp_path):
     line = one_line_error(res)
     assert "at least 2 cameras" in line and "sample 0" in line
     assert not list(out.glob("*/shard-*.h5"))
+
+
+def test_one_frame_motion_file_is_refused_not_written(tmp_path):
+    """Reproduction of item 6: a 1-frame motion file exited 0 with a dataset no solver can use."""
+    from gttdata.mocap.arrays import save_motion
+    from gttdata.mocap.procedural import generate_motion
+
+    walk = generate_motion("walk", seed=0, duration_s=1.0)
+    one = type(walk)(positions=walk.positions[:1], fps_hz=walk.fps_hz, skeleton=walk.skeleton, name="one")
+    motion = save_motion(one, tmp_path / "one.npz")
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(
+        f"name: one\nsplits:\n  - name: test\n    n_samples: 1\n    sources: [{{kind: files, paths: [{motion}]}}]\n"
+        "rig: {kind: ring, n_cameras: 3}\ncapture: {window_s: 0.5, fps_hz: 10}\n"
+    )
+    out = tmp_path / "d"
+    line = one_line_error(
+        CliRunner().invoke(main, ["generate", str(recipe), "--out", str(out), "--no-progress"])
+    )
+    assert "at least 2 cameras" in line and "one" in line
+    assert not list(out.glob("*/shard-*.h5"))
