@@ -252,8 +252,8 @@ def _build_rig(recipe: GenerateRecipe, rng: np.random.Generator) -> tuple[Camera
     if not isinstance(spec, RingRigSpec):
         rig = _file_rig(spec.path)
         return rig, {"kind": "file", "path": spec.path, "n_cameras": len(rig)}
+    n_cameras = int(spec.n_cameras.draw(rng))
     d = {
-        "n_cameras": int(spec.n_cameras.draw(rng)),
         "radius_m": float(spec.radius_m.draw(rng)),
         "height_m": float(spec.height_m.draw(rng)),
         "f_px": float(spec.f_px.draw(rng)),
@@ -262,14 +262,15 @@ def _build_rig(recipe: GenerateRecipe, rng: np.random.Generator) -> tuple[Camera
         "start_angle_deg": float(rng.uniform(0.0, 360.0)) if spec.random_azimuth else 0.0,
     }
     target = (0.0, 0.0, float(spec.target_height_m.draw(rng)))
-    rig = ring_rig(
-        d["n_cameras"],
-        target=target,
-        image_size=tuple(spec.image_size),
-        rng=rng,
-        **{k: v for k, v in d.items() if k != "n_cameras"},
-    )
-    return rig, {"kind": "ring", **d, "target": list(target), "image_size": list(spec.image_size)}
+    w, h = spec.image_size
+    rig = ring_rig(n_cameras, target=target, image_size=(int(w), int(h)), rng=rng, **d)
+    return rig, {
+        "kind": "ring",
+        "n_cameras": n_cameras,
+        **d,
+        "target": list(target),
+        "image_size": list(spec.image_size),
+    }
 
 
 def _capture_params(
@@ -301,8 +302,8 @@ def _scene_motions(
     n_events = int(scene.n_events.draw(rng))
     picked = _pick_refs(refs, split.sources, n_events * scene.n_subjects, rng, first)
     full = [_load(r, split.sources[r.source]) for r in picked]
-    first = split.sources[picked[0].source]
-    window = float((first.window_s or recipe.capture.window_s).draw(rng))
+    lead = split.sources[picked[0].source]
+    window = float((lead.window_s or recipe.capture.window_s).draw(rng))
     shortest = min(m.duration_s for m in full)
     if window > shortest:
         _log.warning(

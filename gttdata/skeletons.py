@@ -61,7 +61,7 @@ FAMILIES: tuple[str, ...] = ("human", "hand", "quadruped", "markers")
 def _tree(name: str, joints: tuple[str, ...], edges: dict[str, str | None], extra=(), mirror=()) -> Skeleton:
     """Build a skeleton from ``{child: parent or None}`` by name, keeping ``joints``' order."""
     idx = {n: i for i, n in enumerate(joints)}
-    parents = tuple(-1 if edges[n] is None else idx[edges[n]] for n in joints)
+    parents = tuple(-1 if (p := edges[n]) is None else idx[p] for n in joints)
     return Skeleton(
         name=name,
         joint_names=joints,
@@ -84,7 +84,7 @@ COCO17_JOINTS: tuple[str, ...] = (
 
 def coco17() -> Skeleton:
     """COCO-17 keypoints (COCO keypoint challenge, MMPose ``coco``), rooted at the nose."""
-    e = {"nose": None}
+    e: dict[str, str | None] = {"nose": None}
     for s in ("left", "right"):
         e |= {
             f"{s}_eye": "nose", f"{s}_ear": f"{s}_eye", f"{s}_shoulder": f"{s}_ear",

@@ -328,6 +328,7 @@ class SequenceDataset(torch.utils.data.Dataset):
             return self._cache[ck]
         path = None
         if self.cache == "disk":
+            assert self.cache_dir is not None  # checked in __init__
             path = self.cache_dir / f"{index:06d}-{sequencing}-{variant}-k{self.k}.pt"
             if path.is_file():
                 try:

@@ -88,9 +88,9 @@ def _check_value(aug: Augmentation, key: str, value: object, default: object) ->
         ok = isinstance(value, bool)
         expected = "true or false"
     elif isinstance(default, int | float):
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        num = value if isinstance(value, int | float) and not isinstance(value, bool) else None
         lo, hi = aug.ranges.get(key, (None, None))
-        ok = ok and (lo is None or value >= lo) and (hi is None or value <= hi)
+        ok = num is not None and (lo is None or num >= lo) and (hi is None or num <= hi)
         expected = "a number" + (f" in [{lo}, {hi}]" if key in aug.ranges else "")
     elif isinstance(default, str):
         allowed = aug.choices.get(key)

@@ -241,9 +241,11 @@ def reconstruct_dloe(
         cand = candidate_neighbours(obs, pt.cost, pt.order, params.n_candidates)
         conv, x_init = pt.convergence, pt.X_init
     use_prior = obs.sequencing != "none" and params.w_prior > 0
-    W_const = (
-        chain_affinity(obs.cam_id, obs.stream_index, row_normalise=True) if use_prior else np.zeros((n, n))
-    )
+    if use_prior:
+        assert obs.stream_index is not None  # partial and full views carry their stream order
+        W_const = chain_affinity(obs.cam_id, obs.stream_index, row_normalise=True)
+    else:
+        W_const = np.zeros((n, n))
     X = x_init
     d = np.ones(n)
     w = None
@@ -267,7 +269,7 @@ def reconstruct_dloe(
         d = d_step(Xi, W, conv, params)
         A = ((1.0 - params.d_const) * d + params.d_const)[:, None] * W
         # X_init as a vanishing ridge keeps the solve unique where a joint is unseen in a linked component.
-        X_new = solve_structure(
+        X_t = solve_structure(
             torch.from_numpy(A),
             centers,
             rays,
@@ -277,7 +279,7 @@ def reconstruct_dloe(
             method=xstep_method,
             x_prior=x_init,
         )
-        X_new = X_new.detach().cpu().numpy() if isinstance(X_new, torch.Tensor) else np.asarray(X_new)
+        X_new = X_t.detach().cpu().numpy() if isinstance(X_t, torch.Tensor) else np.asarray(X_t)
         deltas.append(float(np.linalg.norm((X_new - X) * _INCH_PER_M) / (n * obs.n_joints)))
         X = X_new
         if deltas[-1] < params.tol:

@@ -47,9 +47,15 @@ def stage_losses(
             elif name == "affinity":
                 target = _affinity_target(stage, item, out, cfg.top_q)
                 vals.append(losses.affinity_loss(out.affinity, target, norm=stage.norm))
+            elif name in ("structure", "smoothness") and out.x_est is None:
+                raise ValueError(
+                    f"stage {stage.name!r} weights the {name} loss but the DLOE layer did not run"
+                )
             elif name == "structure":
+                assert out.x_est is not None
                 vals.append(losses.structure_loss(out.x_est, item.points3d, norm=stage.norm))
             elif name == "smoothness":
+                assert out.x_est is not None
                 vals.append(losses.smoothness_loss(out.a_sparse, out.x_est, lambda1=cfg.lambda1))
             elif getattr(model, "pointnet", None) is None:
                 raise ValueError(
@@ -61,7 +67,9 @@ def stage_losses(
                 vals.append(losses.pointnet_loss(out.pointnet_recon, item.inputs.x_init, norm=stage.norm))
         if vals:
             parts[name] = torch.stack([v.float() for v in vals]).mean()
-    total = sum(stage.losses[k] * v for k, v in parts.items())
+    total = torch.zeros(())
+    for k, v in parts.items():
+        total = total + stage.losses[k] * v
     return total, parts
 
 
