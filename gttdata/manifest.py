@@ -274,7 +274,9 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
     paths, _ = scan_shards(root)
     if not paths:
         raise ManifestError(f"{root}: no shard files (expected {root}/<split>/shard-XXXXX.h5)")
-    entries, first_attrs, hashes = [], None, {}
+    entries: list[tuple[ShardEntry, dict]] = []
+    hashes: dict[str, Path] = {}
+    first_attrs: dict = {}
     for p in paths:
         entry, attrs = _read_entry(root, p)
         entries.append((entry, attrs))
@@ -291,7 +293,8 @@ def build_manifest(root: str | Path, *, name: str | None = None) -> Manifest:
     order = _split_order(recipe, {e.split for e, _ in entries} | set(expected))
     entries.sort(key=lambda ea: (order.index(ea[0].split), ea[0].shard_index, ea[0].part))
     variants = tuple(first_attrs.get("variants") or ("orig",))
-    splits, total = {}, {}
+    splits: dict[str, dict] = {}
+    total: dict = {}
     for split in order:
         mine = [(e, a) for e, a in entries if e.split == split]
         _check_coverage(split, [e for e, _ in mine], expected.get(split))

@@ -91,7 +91,7 @@ class ShardReader:
         return {"path": self.path, "_attrs": self._attrs, "_names": self._names}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state["path"])
+        ShardReader.__init__(self, state["path"])
         self._attrs, self._names = state["_attrs"], state["_names"]
 
     def __enter__(self) -> ShardReader:
@@ -183,6 +183,7 @@ class ShardReader:
     def __len__(self) -> int:
         if self._names is None:
             self.file  # noqa: B018 - opening reads the sample list
+        assert self._names is not None  # set by opening
         return len(self._names)
 
     def variants(self, i: int) -> tuple[str, ...]:
@@ -202,12 +203,14 @@ class ShardReader:
         n = len(self)
         if not -n <= i < n:
             raise IndexError(f"{self.path}: sample index {i} out of range for {n} samples")
+        assert self._names is not None  # len() opened the file
         return self._names[i]
 
     def _group(self, i: int) -> h5py.Group:
         name = self._name(i)
         try:
             self.file  # noqa: B018 - (re)opens the file in this process, setting self._samples
+            assert self._samples is not None
             return h5py.Group(h5g.open(self._samples.id, name.encode()))
         except (KeyError, OSError, RuntimeError) as exc:
             raise ShardFormatError(f"{self._where(i, name)}: unreadable group ({_short(exc)})") from exc

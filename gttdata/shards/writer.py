@@ -230,20 +230,22 @@ class ShardWriter:
             raise ValueError(
                 f"sample {orig.name!r}: every sample of a shard must hold variants {self._variants}, got {names}"
             )
-        before = self._file.id.get_filesize()
+        f = self._file
+        assert f is not None  # opened above
+        before = f.id.get_filesize()
         # HDF5 does not survive a failed write (a full disk segfaulted the process): reserve the space
         # first, so a full disk is one clean error here and the writes below cannot fail for space.
         need = _SAMPLE_MARGIN_BYTES + sum(_nbytes(s) for s in group)
-        reserve_space(self._file.id.get_vfd_handle(), before, need, self._path())
-        self._write_group(self._file[SAMPLES_GROUP], self._next_sample, orig, variants)
+        reserve_space(f.id.get_vfd_handle(), before, need, self._path())
+        self._write_group(f[SAMPLES_GROUP], self._next_sample, orig, variants)
         self._stats = merge_stats(self._stats, sample_stats(orig))
         if not self._skeleton:
             self._skeleton = _json(orig.skeleton.to_dict())
         self._skeletons[orig.skeleton.name] = self._skeletons.get(orig.skeleton.name, 0) + 1
         self._n += 1
         self._next_sample += 1
-        self._file.flush()
-        size = self._file.id.get_filesize()
+        f.flush()
+        size = f.id.get_filesize()
         if self._n >= self.max_samples or size + (size - before) > self.max_bytes:
             self._finish()
 
@@ -270,7 +272,7 @@ class ShardWriter:
 
     def abort(self) -> None:
         """Close and delete every unfinished or uncommitted ``.tmp`` file (finished files are kept)."""
-        tmps = [tmp for tmp, _ in self._pending]
+        tmps: list[Path | None] = [tmp for tmp, _ in self._pending]
         if self._file is not None:
             try:
                 self._file.close()
@@ -322,6 +324,7 @@ class ShardWriter:
 
     def _finish(self) -> None:
         f, tmp = self._file, self._tmp
+        assert f is not None and tmp is not None  # only called with a shard open
         f.attrs["schema_version"] = SCHEMA_VERSION
         for key, value in self.attrs.items():
             f.attrs[key] = value

@@ -29,7 +29,7 @@ def _hold_and_release(integral: np.ndarray, load: np.ndarray, fps_hz: float) -> 
     base = integral.copy()  # correction = integral - base
     for k, (a, b) in enumerate(zip(starts, stops, strict=True)):
         base[a:b] = integral[a]
-        nxt = starts[k + 1] if k + 1 < starts.size else min(n, b + int(_RELEASE_S * fps_hz))
+        nxt = int(starts[k + 1]) if k + 1 < starts.size else min(n, int(b) + int(_RELEASE_S * fps_hz))
         if nxt > b:
             ramp = smootherstep((np.arange(b, nxt) - b + 1) / (nxt - b))
             base[b:nxt] = integral[a] + ramp * (integral[b - 1] - integral[a])
