@@ -32,10 +32,12 @@ from gttnet.train.checkpoint import (
     save_checkpoint,
     set_rng_states,
 )
+from gttnet.train.curves import plot_learning_curves
 from gttnet.train.objective import StepObjective, stage_losses
 from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
 from gttnet.train.rundir import open_run
 from gttnet.train.stages import Stage
+from gttnet.train.threads import limit_cpu_threads
 
 __all__ = ["RunResult", "select_device", "freeze_parts", "train"]
 
@@ -142,6 +144,7 @@ def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
     """
     model.eval()
     totals, mpjpe, mpjpe_init, precision = [], [], [], []
+    per_condition: dict[str, list[float]] = {}
     parts_sum: dict[str, float] = {}
     for item in items:
         out = model([item.inputs], solve=True)
@@ -150,6 +153,7 @@ def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
         for k, v in parts.items():
             parts_sum[k] = parts_sum.get(k, 0.0) + float(v) / len(items)
         mpjpe.append(float((out[0].x_est - item.points3d).norm(dim=-1).mean()) * 1000.0)
+        per_condition.setdefault(item.inputs.sequencing, []).append(mpjpe[-1])
         mpjpe_init.append(float((item.inputs.x_init - item.points3d).norm(dim=-1).mean()) * 1000.0)
         aff = out[0].affinity
         real = aff.mask.gather(1, aff.keep)
@@ -162,33 +166,14 @@ def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
         "mpjpe_init_mm": float(np.mean(mpjpe_init)),
         "mpjpe_init_median_mm": float(np.median(mpjpe_init)),
         "kept_precision": float(np.mean(precision)),
+        **{f"mpjpe_{c}_mm": float(np.mean(v)) for c, v in per_condition.items()},
+        **{f"mpjpe_{c}_median_mm": float(np.median(v)) for c, v in per_condition.items()},
         **{f"loss_{k}": v for k, v in parts_sum.items()},
     }
 
 
 def _plot(run_dir: Path, history: list[dict]) -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        log.info("matplotlib not installed: no loss curve")
-        return
-    fig, ax = plt.subplots(figsize=(7, 4))
-    tr = [r for r in history if r["kind"] == "train"]
-    va = [r for r in history if r["kind"] == "val"]
-    ax.semilogy([r["global_step"] for r in tr], [r["loss"] for r in tr], label="train")
-    ax.semilogy([r["global_step"] for r in va], [r["loss"] for r in va], "o-", label="validation")
-    for r in tr:
-        if r["step"] == 1 and r["global_step"] > 1:
-            ax.axvline(r["global_step"], color="grey", lw=0.5)
-    ax.set_xlabel("step")
-    ax.set_ylabel("stage loss")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(run_dir / "loss_curve.png", dpi=100)
-    plt.close(fig)
+    plot_learning_curves(history, run_dir / "loss_curve.png", title=run_dir.name)
 
 
 def _dist_setup(device_name: str) -> tuple[int, int, int]:
@@ -236,6 +221,8 @@ def _prepare(
     device_name = device or recipe.train.device
     rank, world, local = _dist_setup(device_name)
     dev = select_device(device_name, local_rank=local)
+    if dev.type == "cpu":
+        limit_cpu_threads(recipe.train.threads)
     dtype = torch.float64 if recipe.train.dtype == "float64" else torch.float32
     run_dir = _run_dir(recipe, out, rank, world)
     if rank == 0:
@@ -282,13 +269,24 @@ def _prepare(
     per_rank = n_train // world
     stream = EpochStream(n_train, seed=recipe.seed, rank=rank, world=world,
                          start_epoch=state.keys_consumed // per_rank, start_pos=state.keys_consumed % per_rank)  # fmt: skip
+    workers = spec.num_workers
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if dev.type == "cpu" and workers > cores:
+        # Item preparation is CPU-bound: more workers than cores only fight the training process.
+        log.info("data.num_workers %d > %d cores: using %d workers", workers, cores, cores)
+        workers = cores
     loader = torch.utils.data.DataLoader(
         train_set, batch_size=recipe.train.batch_size, sampler=stream, collate_fn=collate_items,
-        num_workers=spec.num_workers, persistent_workers=spec.num_workers > 0,
+        num_workers=workers, persistent_workers=workers > 0, worker_init_fn=_worker_init,
     )  # fmt: skip
     spe = recipe.train.steps_per_epoch or max(1, per_rank // recipe.train.batch_size)
     ctx = _Context(recipe, run_dir, model, dev, dtype, rank, world, logger, iter(loader), val_items, spe)
     return ctx, state
+
+
+def _worker_init(_worker_id: int) -> None:
+    """DataLoader workers prepare items with numpy: one BLAS thread each (torch is already single-threaded)."""
+    limit_cpu_threads(1)
 
 
 def _step(ctx: _Context, step_fn, optimizer, trainable, stage: Stage, state: LoopState, lr: float):
@@ -306,10 +304,11 @@ def _step(ctx: _Context, step_fn, optimizer, trainable, stage: Stage, state: Loo
     with torch.autocast(device_type=ctx.dev.type, dtype=torch.bfloat16, enabled=amp):
         loss, parts = step_fn(batch, stage)
     optimizer.zero_grad(set_to_none=True)
-    loss.backward()
-    if ctx.recipe.train.grad_clip is not None:
-        torch.nn.utils.clip_grad_norm_(trainable, ctx.recipe.train.grad_clip)
-    optimizer.step()
+    if loss.requires_grad:  # not when every term is constant (e.g. only l_X on full items: the time chain)
+        loss.backward()
+        if ctx.recipe.train.grad_clip is not None:
+            torch.nn.utils.clip_grad_norm_(trainable, ctx.recipe.train.grad_clip)
+        optimizer.step()
     value = float(loss.detach())
     if not math.isfinite(value):
         raise FloatingPointError(f"stage {stage.name!r} step {state.stage_step + 1}: loss is {value}")
@@ -427,7 +426,7 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
             step_fn = torch.nn.parallel.DistributedDataParallel(
                 objective, device_ids=ids, find_unused_parameters=True
             )
-        t_last, seqs = time.perf_counter(), 0
+        t_last, seqs, window = time.perf_counter(), 0, []
         while state.stage_step < total:
             if max_steps is not None and done_here >= max_steps:
                 _save(ctx, optimizer, state)
@@ -438,16 +437,19 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
             state.stage_step, state.global_step = state.stage_step + 1, state.global_step + 1
             state.keys_consumed += recipe.train.batch_size
             done_here, seqs = done_here + 1, seqs + n_seq
+            window.append((loss, parts))
             bar.update(1)
             if state.stage_step % recipe.train.log_every == 0 or state.stage_step in (1, total):
                 rate = seqs / max(time.perf_counter() - t_last, 1e-9)
+                # Means over the steps since the last record: single steps swing by 100x between captures.
+                mean = {f"loss_{k}": float(np.mean([p[k] for _, p in window])) for k in parts}
                 rec = {"kind": "train", "stage": stage.name, "stage_index": si, "step": state.stage_step,
-                       "global_step": state.global_step, "lr": lr, "loss": loss,
-                       **{f"loss_{k}": v for k, v in parts.items()}, "seq_per_s": rate}  # fmt: skip
+                       "global_step": state.global_step, "lr": lr, "loss": float(np.mean([v for v, _ in window])),
+                       "loss_last": loss, "window": len(window), **mean, "seq_per_s": rate}  # fmt: skip
                 state.history.append(rec)
                 ctx.logger.write(rec)
                 bar.set_postfix(stage=stage.name, loss=f"{loss:.4g}", seq_s=f"{rate:.1f}")
-                t_last, seqs = time.perf_counter(), 0
+                t_last, seqs, window = time.perf_counter(), 0, []
             if state.stage_step % ctx.steps_per_epoch == 0 or state.stage_step == total:
                 _validate_and_schedule(ctx, stage, si, state, lr)
             if state.stage_step % recipe.train.checkpoint_every == 0 and state.stage_step < total:

@@ -120,6 +120,9 @@ class TrainSpec:
         log_every: Steps between log records.
         checkpoint_every: Steps between checkpoints (each stage's end is always checkpointed).
         steps_per_epoch: Steps that make one epoch (validation, plateau); None: one pass over the data.
+        threads: CPU threads (torch and BLAS) of the training process when it trains on the CPU; None
+            keeps the libraries' defaults. 1 is fastest on a shared or small machine (see
+            :func:`gttnet.train.threads.limit_cpu_threads`); raise it on an idle many-core one.
     """
 
     batch_size: int = 2
@@ -131,6 +134,7 @@ class TrainSpec:
     log_every: int = 10
     checkpoint_every: int = 200
     steps_per_epoch: int | None = None
+    threads: int | None = 1
 
 
 @dataclass
@@ -179,6 +183,8 @@ class TrainRecipe:
             )
         if self.train.device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"train.device must be auto, cpu or cuda, got {self.train.device!r}")
+        if self.train.threads is not None and self.train.threads < 1:
+            raise ValueError(f"train.threads must be >= 1 or null, got {self.train.threads}")
         if self.train.dtype not in ("float32", "float64"):
             raise ValueError(f"train.dtype must be float32 or float64, got {self.train.dtype!r}")
 

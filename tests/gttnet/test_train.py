@@ -309,3 +309,35 @@ def test_shard_source_is_checked_against_its_registered_manifest(tmp_path):
         open_source(spec, "train")
     with pytest.raises(RecipeError, match="applies to kind 'shards' only"):
         parse_train_recipe(_recipe(tmp_path, data__sources=[{**source, "kind": "recipe"}]))
+
+
+def test_limit_cpu_threads_sets_torch_and_blas():
+    from threadpoolctl import threadpool_info
+
+    from gttnet.train.threads import limit_cpu_threads
+
+    before = torch.get_num_threads()
+    try:
+        limit_cpu_threads(1)
+        assert torch.get_num_threads() == 1
+        assert all(p["num_threads"] == 1 for p in threadpool_info() if p["user_api"] == "blas")
+        with pytest.raises(ValueError, match="threads must be >= 1"):
+            limit_cpu_threads(0)
+    finally:
+        torch.set_num_threads(before)
+    with pytest.raises(RecipeError, match="train.threads must be >= 1"):
+        parse_train_recipe(_recipe(Path(".")), ["train.threads=0"])
+
+
+def test_validation_per_condition_and_learning_curves(tmp_path):
+    """Validation records MPJPE per sequencing condition; the curves mark each stage and are written."""
+    from gttnet.train.curves import _stages, plot_learning_curves, read_history
+
+    res = train(parse_train_recipe(_recipe(tmp_path)), out=tmp_path / "run", progress=False)
+    val = [r for r in res.state.history if r["kind"] == "val"]
+    for cond in ("none", "partial", "full"):
+        assert all(np.isfinite(r[f"mpjpe_{cond}_mm"]) and f"mpjpe_{cond}_median_mm" in r for r in val)
+    history = read_history(tmp_path / "run")
+    assert _stages(history) == [(0, "affinity", 0), (1, "dloe", 3)]
+    assert (tmp_path / "run" / "loss_curve.png").is_file()
+    assert plot_learning_curves(history, tmp_path / "again.png") == tmp_path / "again.png"
