@@ -93,8 +93,8 @@ def _distortion(i: int, method: str, tmp: Path) -> dict:
         out[name] = _run(proj, "--method", method)["mpjpe_mm"]
         if k1:
             from gttdata.recording import Recording, ground_truth_for, load_project
-            from gttnet.baselines.registry import reconstruct
             from gttnet.evaluate.metrics import mpjpe_mm
+            from gttnet.methods import reconstruct
 
             spec = load_project(proj)
             view = Recording.load(spec).view(undistort=False)

@@ -45,7 +45,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from gttdata.capture.views import Observations
-from gttnet.baselines.registry import Reconstruction, check_sequencing, method_spec
+from gttnet.methods import Reconstruction, check_sequencing, method_spec
 
 __all__ = [
     "AUTO_MIN_IMAGES",
@@ -262,7 +262,7 @@ def reconstruct_windowed(
     n = obs.n_images
     if window == "auto":
         if obs.sequencing == "none" or n <= AUTO_MIN_IMAGES:
-            from gttnet.baselines.registry import reconstruct
+            from gttnet.methods import reconstruct
 
             return reconstruct(obs, method, **options)
         length, auto_overlap = auto_window(obs)

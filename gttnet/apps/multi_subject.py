@@ -241,7 +241,7 @@ def reconstruct_subjects(
     Returns:
         The :class:`MultiSubjectResult`.
     """
-    from gttnet.baselines.registry import reconstruct
+    from gttnet.methods import reconstruct
 
     if n_subjects != 2:
         raise ValueError(f"n_subjects: only 2 subjects are supported, got {n_subjects}")
@@ -330,7 +330,7 @@ def reconstruct_loaded_subjects(loaded, *, method: str, n_subjects: int = 2, see
         joints ``c*P .. c*P+P-1``, and a JSON-ready dict (with clustering accuracy and per-subject MPJPE
         when the input holds ground truth).
     """
-    from gttnet.baselines.registry import Reconstruction
+    from gttnet.methods import Reconstruction
 
     obs, subject = hide_identities(loaded.observations, n_subjects=n_subjects, seed=seed)
     res = reconstruct_subjects(obs, n_subjects=n_subjects, method=method, seed=seed, **options)

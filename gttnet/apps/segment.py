@@ -231,7 +231,7 @@ def segment_capture(obs, *, method: str = "dloe", n_events: int | None = None, *
     Returns:
         ``(reconstruction, segmentation)``.
     """
-    from gttnet.baselines.registry import reconstruct
+    from gttnet.methods import reconstruct
 
     rec = reconstruct(obs, method, **options)
     if rec.affinity is None:

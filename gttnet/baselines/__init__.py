@@ -1,26 +1,7 @@
-"""Reconstruction methods behind one interface: ``reconstruct(obs, method)`` over a registry of methods.
+"""Classical reconstruction methods, each registered in :mod:`gttnet.methods` by its module.
 
-Built-in methods (registered when first looked up): ``pseudo`` (pseudo-triangulation), ``dloe``
-(DLOE alternating optimisation), ``dct`` (trajectory basis; needs timestamps) and ``hpf`` (high-pass
-filter prior; needs the global order). ``gttnet`` is registered by ``gttnet.model.inference``.
+``pseudo`` (pseudo-triangulation, :mod:`~gttnet.baselines.pseudo`), ``dloe`` (DLOE alternating
+optimisation, :mod:`~gttnet.baselines.dloe`), ``dct`` (trajectory basis; needs timestamps,
+:mod:`~gttnet.baselines.trajectory_basis`) and ``hpf`` (high-pass filter prior; needs the global order,
+:mod:`~gttnet.baselines.highpass`). Call them through :func:`gttnet.methods.reconstruct`.
 """
-
-from __future__ import annotations
-
-from gttnet.baselines.registry import (
-    MethodSpec,
-    Reconstruction,
-    available_methods,
-    method_spec,
-    reconstruct,
-    register_method,
-)
-
-__all__ = [
-    "MethodSpec",
-    "Reconstruction",
-    "available_methods",
-    "method_spec",
-    "reconstruct",
-    "register_method",
-]

@@ -10,9 +10,9 @@ import torch
 
 from gttdata.capture.views import Observations
 from gttnet.baselines._simplex import solve_simplex_qp
-from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.geometry.neighbours import chain_affinity, neighbourhoods
 from gttnet.geometry.triangulation import pseudo_triangulate
+from gttnet.methods import Reconstruction, register_method
 
 __all__ = ["DLOEParams", "candidate_neighbours", "d_step", "mds_embedding", "reconstruct_dloe", "w_step"]
 

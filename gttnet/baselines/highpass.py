@@ -10,8 +10,8 @@ from scipy.linalg import solveh_banded
 
 from gttdata.capture.views import Observations
 from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
-from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.geometry.neighbours import temporal_chain_affinity
+from gttnet.methods import Reconstruction, register_method
 
 __all__ = ["LAMBDAS", "difference_operator", "fit_highpass", "reconstruct_hpf"]
 

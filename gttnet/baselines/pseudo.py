@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from gttdata.capture.views import Observations
-from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.geometry.triangulation import pseudo_triangulate
+from gttnet.methods import Reconstruction, register_method
 
 __all__ = ["reconstruct_pseudo", "top_q_affinity"]
 

@@ -8,9 +8,9 @@ import numpy as np
 
 from gttdata.capture.views import Observations
 from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
-from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.geometry.neighbours import temporal_chain_affinity
 from gttnet.geometry.ordering import spectral_order
+from gttnet.methods import Reconstruction, register_method
 
 __all__ = ["dct_basis", "fit_trajectory_basis", "reconstruct_dct"]
 

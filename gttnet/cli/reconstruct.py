@@ -31,6 +31,26 @@ def _method_fields(rec) -> dict:
     return out
 
 
+class MethodChoice(click.Choice):
+    """``click.Choice`` over :func:`gttnet.methods.available_methods`, read when first needed.
+
+    Reading the registry imports the solvers (and torch); deferring it keeps ``gttnet --help`` fast.
+    """
+
+    def __init__(self) -> None:
+        super().__init__((), case_sensitive=True)
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        from gttnet.methods import available_methods
+
+        return tuple(available_methods())
+
+    @choices.setter
+    def choices(self, value) -> None:  # click.Choice.__init__ assigns it; the registry is the source
+        pass
+
+
 def _report(loaded, rec) -> dict:
     import numpy as np
 
@@ -73,7 +93,7 @@ def _window_arg(value: str) -> int | str | None:
 
 
 def _method_default() -> str:
-    from gttnet.baselines.registry import available_methods
+    from gttnet.methods import available_methods
 
     return "auto" if "auto" in available_methods() else "dloe"
 
@@ -148,7 +168,7 @@ def _timing_options(method: str, view) -> dict:
 
     import numpy as np
 
-    from gttnet.baselines.registry import method_spec
+    from gttnet.methods import method_spec
 
     params = inspect.signature(method_spec(method).fn).parameters
     obs, out = view.observations, {}
@@ -324,8 +344,9 @@ def _resolve_input(
 @click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
 @click.option(
     "--method",
+    type=MethodChoice(),
     default=None,
-    help="Reconstruction method (see gttnet.baselines.registry.available_methods) [default: auto where "
+    help="Reconstruction method (see gttnet.methods.available_methods) [default: auto where "
     "available, else dloe].",
 )
 @click.option(
@@ -422,7 +443,7 @@ def reconstruct_cmd(
       gttnet reconstruct --calibration runs/recording/calibration.toml --keypoints runs/recording/cam_0 runs/recording/cam_1 runs/recording/cam_2 --fps 10 --out runs/recording/result.trc
       gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
-    from gttnet.baselines.registry import check_sequencing, method_spec, reconstruct
+    from gttnet.methods import check_sequencing, method_spec, reconstruct
 
     method = method or _method_default()
     window_arg = _window_arg(window)

@@ -102,7 +102,7 @@ class MethodEntry:
     Args:
         name: Column name in the outputs (defaults to ``method``).
         method: Registered reconstruction method (``pseudo``, ``dloe``, ``dct``, ``hpf``, ``gttnet``).
-        options: Method options, e.g. ``{model: runs/x/model.pt, q: 3}`` (``q`` = GTT-Net top-Q at test).
+        options: Method options, e.g. ``{model: runs/x/model.pt, top_q: 3}`` (GTT-Net top-Q at test).
         note: Free text recorded with every skip of this method (e.g. how to train the missing model).
     """
 

@@ -8,7 +8,6 @@ import functools
 import json
 import logging
 import os
-import time
 from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -18,10 +17,10 @@ import numpy as np
 
 from gttdata.capture.sample import CaptureSample
 from gttdata.capture.views import make_view
-from gttnet.baselines.registry import Reconstruction, check_sequencing, method_spec, reconstruct
 from gttnet.errors import ModelError, SequencingError
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
 from gttnet.evaluate.recipe import EvalRecipe, EvalRecipeError, MethodEntry
+from gttnet.methods import Reconstruction, method_spec, reconstruct
 
 __all__ = ["CSV_FIELDS", "Job", "plan_jobs", "run_job", "run_method", "read_rows", "evaluate"]
 
@@ -133,22 +132,13 @@ def _load_sample(recipe: EvalRecipe, job: Job) -> CaptureSample:
     return samples[names.index(recipe.data.variant)]
 
 
-@functools.lru_cache(maxsize=8)
-def _gttnet_reconstructor(model: str | None):
-    from gttnet.model.inference import GTTNetReconstructor
-
-    return GTTNetReconstructor(model)
-
-
 def run_method(obs, entry: MethodEntry) -> Reconstruction:
     """Run one method entry on observations (ground truth never enters).
 
-    ``gttnet`` accepts the extra option ``q`` (top-Q affinities kept per row at test time, the sparsity
-    ablation); every other option goes to :func:`gttnet.baselines.registry.reconstruct`.
-
     Args:
         obs: :class:`~gttdata.capture.views.Observations`.
-        entry: Method entry of the recipe.
+        entry: Method entry of the recipe; its options go to :func:`gttnet.methods.reconstruct` (e.g.
+            ``top_q`` for GTT-Net, the sparsity ablation).
 
     Returns:
         The timed :class:`Reconstruction`.
@@ -157,27 +147,7 @@ def run_method(obs, entry: MethodEntry) -> Reconstruction:
         SequencingError: The input lacks the sequencing the method needs.
         ModelError: A GTT-Net model is missing.
     """
-    opts = dict(entry.options)
-    q = opts.pop("q", None)
-    if entry.method != "gttnet" or q is None:
-        return reconstruct(obs, entry.method, **opts)
-    from gttnet.geometry.ordering import spectral_order
-
-    check_sequencing(obs, method_spec("gttnet"))
-    rec = _gttnet_reconstructor(opts.get("model"))
-    head = rec.model.affinity
-    saved, head.top_q = head.top_q, int(q)
-    try:
-        t0 = time.perf_counter()
-        out = rec(obs)
-        order = spectral_order(out.affinity)
-        seconds = time.perf_counter() - t0
-    finally:
-        head.top_q = saved
-    info = {**out.info, "top_q": int(q)}
-    return dataclasses.replace(
-        out, order=order, seconds=seconds, method="gttnet", sequencing=obs.sequencing, info=info
-    )
+    return reconstruct(obs, entry.method, **entry.options)
 
 
 def _row(job: Job, seq: str, name: str, n: int, **fields) -> dict:

@@ -128,8 +128,8 @@ def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = Fals
     """
     import torch
 
-    from gttnet.baselines.registry import reconstruct
     from gttnet.evaluate.plots import plot_runtime
+    from gttnet.methods import reconstruct
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

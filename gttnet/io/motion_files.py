@@ -91,7 +91,7 @@ def motion_table(rec, view) -> MotionTable:
     """Rows of ``rec`` in time order (see the module docstring).
 
     Args:
-        rec: A :class:`~gttnet.baselines.registry.Reconstruction` of ``view.observations``.
+        rec: A :class:`~gttnet.methods.Reconstruction` of ``view.observations``.
         view: The :class:`~gttdata.recording.RecordingView` (camera names, frames, rates) it ran on.
     """
     obs = view.observations

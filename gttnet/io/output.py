@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 
 from gttdata.fileio import write_bytes_atomic, write_error
-from gttnet.baselines.registry import Reconstruction
+from gttnet.methods import Reconstruction
 
 __all__ = ["OUTPUT_VERSION", "write_reconstruction", "read_reconstruction"]
 

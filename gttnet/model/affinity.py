@@ -53,7 +53,13 @@ class AffinityHead(nn.Module):
         self.mode, self.top_q, self.eps = mode, top_q, eps
 
     def forward(
-        self, feats: torch.Tensor, slot_feats: torch.Tensor, index: torch.Tensor, mask: torch.Tensor
+        self,
+        feats: torch.Tensor,
+        slot_feats: torch.Tensor,
+        index: torch.Tensor,
+        mask: torch.Tensor,
+        *,
+        top_q: int | None = None,
     ) -> AffinityOutput:
         """Affinities over the neighbourhood.
 
@@ -62,6 +68,7 @@ class AffinityHead(nn.Module):
             slot_feats: Bottleneck features of each patch slot, shape ``(N, K+1, P, 3)`` (reference mode).
             index: Patch slot image indices (slot 0 = self), shape ``(N, K+1)``.
             mask: Real slots, shape ``(N, K+1)`` bool.
+            top_q: Entries kept per row for this call; None = ``self.top_q``.
 
         Returns:
             :class:`AffinityOutput`.
@@ -75,7 +82,7 @@ class AffinityHead(nn.Module):
         dist = torch.sqrt(diff.pow(2).sum(-1) + self.eps)
         nmask = mask[:, 1:]
         values = 2.0 * torch.sigmoid(-dist) * nmask.to(dist.dtype)
-        q = min(self.top_q, values.shape[1])
+        q = min(self.top_q if top_q is None else int(top_q), values.shape[1])
         ranked = values.masked_fill(~nmask, -1.0)
         _, keep = torch.topk(ranked, q, dim=1)
         kept = values.gather(1, keep)

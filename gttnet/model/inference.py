@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 import logging
 from pathlib import Path
 
@@ -10,9 +10,9 @@ import numpy as np
 import torch
 
 from gttdata.capture.views import Observations
-from gttnet.baselines.registry import Reconstruction, register_method
 from gttnet.errors import ModelError
 from gttnet.geometry.ordering import spectral_order, stream_consistent_order, timestamp_order
+from gttnet.methods import Reconstruction, register_method
 from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
 from gttnet.model.inputs import prepare_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
@@ -116,13 +116,12 @@ def load_model(path: str | Path | None = None, *, device: str | torch.device = "
 class GTTNetReconstructor:
     """Reconstruct with a trained GTT-Net from :class:`Observations` only (ground truth never enters).
 
+    The loaded model is never modified: inference options are arguments of each call.
+
     Args:
         model_path: Model file or run directory; None uses the bundled model.
         device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
-        lambda2: Ray weight of the DLOE layer at inference; None keeps the model's own setting (rays
-            pinned for the bundled model). A finite, noise-aware value
-            (:func:`gttnet.solvers.xstep.noise_aware_lambda2`) lets joints leave their rays by about the
-            pixel noise; the learned affinity is unchanged.
+        lambda2: Default ray weight of the DLOE layer for calls that pass none (see :meth:`__call__`).
         candidates: Neighbour search under ``none`` sequencing (see
             :func:`gttnet.model.inputs.prepare_inputs`): ``"auto"``, ``"dense"`` or ``"kdtree"``.
     """
@@ -140,15 +139,22 @@ class GTTNetReconstructor:
         self.device = torch.device(device)
         self.candidates = candidates
         self.model = load_model(model_path, device=self.device)
-        if lambda2 is not None:
-            self.model.config = dataclasses.replace(self.model.config, lambda2=float(lambda2))
+        self.lambda2 = lambda2
 
     @torch.no_grad()
-    def __call__(self, obs: Observations) -> Reconstruction:
+    def __call__(
+        self, obs: Observations, *, top_q: int | None = None, lambda2: float | None = None
+    ) -> Reconstruction:
         """Reconstruct one capture.
 
         Args:
             obs: Observations of one sequencing condition.
+            top_q: Affinities kept per image at test time (the sparsity ablation); None keeps the
+                model's own Q.
+            lambda2: Ray weight of the DLOE layer; None keeps the reconstructor's, else the model's own
+                setting (rays pinned for the bundled model). A finite, noise-aware value
+                (:func:`gttnet.solvers.xstep.noise_aware_lambda2`) lets joints leave their rays by about
+                the pixel noise; the learned affinity is unchanged.
 
         Returns:
             :class:`Reconstruction` with points3d (N, J, 3) in world metres, the solver's affinity and the
@@ -157,8 +163,12 @@ class GTTNetReconstructor:
         """
         if not isinstance(obs, Observations):
             raise TypeError(f"GTTNetReconstructor takes Observations, got {type(obs).__name__}")
-        seq = prepare_inputs(obs, k=self.model.config.k, candidates=self.candidates).to(self.device)
-        out = self.model([seq], solve=True)[0]
+        if top_q is not None and int(top_q) < 1:
+            raise ValueError(f"top_q must be >= 1, got {top_q}")
+        lambda2 = self.lambda2 if lambda2 is None else lambda2
+        cfg = self.model.config
+        seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates).to(self.device)
+        out = self.model([seq], solve=True, top_q=top_q, lambda2=lambda2)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         if obs.sequencing == "none":
             order = spectral_order(_neighbourhood_affinity(out.affinity.values, seq.nbr))
@@ -168,7 +178,11 @@ class GTTNetReconstructor:
             points3d=out.x_est.double().cpu().numpy(),
             affinity=affinity,
             order=order,
-            info={"k": self.model.config.k, "top_q": self.model.config.top_q, "device": str(self.device)},
+            info={
+                "k": cfg.k,
+                "top_q": cfg.top_q if top_q is None else int(top_q),
+                "device": str(self.device),
+            },
         )
 
 
@@ -202,25 +216,28 @@ def _neighbourhood_affinity(values: torch.Tensor, nbr: torch.Tensor) -> np.ndarr
     return A
 
 
-_CACHE: dict[tuple[str, str, str], GTTNetReconstructor] = {}
+@functools.lru_cache(maxsize=8)
+def cached_reconstructor(model: str | None = None, candidates: str = "auto") -> GTTNetReconstructor:
+    """The one loaded-model cache: a :class:`GTTNetReconstructor` per model path (None = bundled)."""
+    return GTTNetReconstructor(model, candidates=candidates)
 
 
 @register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
 def reconstruct_gttnet(
-    obs: Observations, model: str | None = None, lambda2: float | None = None, candidates: str = "auto"
+    obs: Observations,
+    model: str | None = None,
+    lambda2: float | None = None,
+    top_q: int | None = None,
+    candidates: str = "auto",
 ) -> Reconstruction:
     """GTT-Net with a bundled model or a given model file.
 
-    GTT-Net with the bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31
-    model for CMU-31, the PointNet model otherwise), or the model file/run directory ``model``;
-    ``lambda2`` and ``candidates`` as in :class:`GTTNetReconstructor`.
+    The bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31 model for
+    CMU-31, the PointNet model otherwise), or the model file/run directory ``model``. ``lambda2`` and
+    ``top_q`` override the model's DLOE ray weight and test-time Q for this call (see
+    :meth:`GTTNetReconstructor.__call__`); the cached model is not modified. ``candidates`` as in
+    :class:`GTTNetReconstructor`.
     """
     if model is None:
         model = str(bundled_model_for(obs.skeleton))
-    key = (str(model), str(lambda2), candidates)
-    if key not in _CACHE:
-        _CACHE[key] = GTTNetReconstructor(model, lambda2=lambda2, candidates=candidates)
-    rec = _CACHE[key](obs)
-    return Reconstruction(
-        points3d=rec.points3d, affinity=np.asarray(rec.affinity), order=rec.order, info=rec.info
-    )
+    return cached_reconstructor(str(model), candidates)(obs, top_q=top_q, lambda2=lambda2)

@@ -148,12 +148,21 @@ class GTTNet(nn.Module):
         )
         return _normalise(virtual), recon
 
-    def forward(self, batch: list[SequenceInput], *, solve: bool = True) -> list[SequenceOutput]:
+    def forward(
+        self,
+        batch: list[SequenceInput],
+        *,
+        solve: bool = True,
+        top_q: int | None = None,
+        lambda2: float | None = None,
+    ) -> list[SequenceOutput]:
         """Run the network on a list of sequences.
 
         Args:
             batch: Sequences (each with its own N).
             solve: Run the DLOE layer (needed for ℓ^X, ℓ^S and inference; stage 1 skips it).
+            top_q: Affinities kept per row for this call; None = ``config.top_q``.
+            lambda2: Ray weight of the DLOE layer for this call; None = ``config.lambda2``.
 
         Returns:
             One :class:`SequenceOutput` per sequence.
@@ -177,7 +186,7 @@ class GTTNet(nn.Module):
         index, mask = patch_index(torch.cat(nbrs))
         seg = torch.cat(segs)
         u = self.unet(x, index, mask, seg, len(batch))
-        aff = self.affinity(u.bottleneck, u.bottleneck_slots, index, mask)
+        aff = self.affinity(u.bottleneck, u.bottleneck_slots, index, mask, top_q=top_q)
         outs, start = [], 0
         for seq, n, recon in zip(batch, sizes, recons, strict=True):
             sl = slice(start, start + n)
@@ -191,17 +200,20 @@ class GTTNet(nn.Module):
             else:
                 chain = seq.chain if seq.sequencing == "partial" else None
                 a_sparse = sparse_affinity(a.kept, a.keep, seq.nbr, chain=chain)
-            x_est = self.solve(a_sparse, seq) if solve else None
+            x_est = self.solve(a_sparse, seq, lambda2=lambda2) if solve else None
             pairs = [(d[sl], e[sl]) for d, e in u.pairs]
             outs.append(SequenceOutput(a, a_sparse, x_est, pairs, recon))
         return outs
 
-    def solve(self, a_sparse: torch.Tensor, seq: SequenceInput) -> torch.Tensor:
+    def solve(
+        self, a_sparse: torch.Tensor, seq: SequenceInput, *, lambda2: float | None = None
+    ) -> torch.Tensor:
         """DLOE layer: structure from the affinity (float32 at least, outside autocast).
 
         Args:
             a_sparse: A^S, shape ``(N, N)``.
             seq: The sequence's inputs (rays and centres in world).
+            lambda2: Ray weight; None = ``config.lambda2``.
 
         Returns:
             X^E in world, metres, shape ``(N, J, 3)``.
@@ -218,7 +230,7 @@ class GTTNet(nn.Module):
                 seq.rays.to(dtype),
                 seq.visible,
                 lambda1=self.config.lambda1,
-                lambda2=self.config.lambda2,
+                lambda2=self.config.lambda2 if lambda2 is None else float(lambda2),
                 method=self.config.solver_method,
                 **prior,
             )

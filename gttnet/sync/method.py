@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from gttdata.capture.views import Observations
-from gttnet.baselines.registry import Reconstruction, register_method
+from gttnet.methods import Reconstruction, register_method
 from gttnet.sync.clocks import apply_clocks, clock_times
 from gttnet.sync.recover import recover_clocks
 
@@ -55,7 +55,7 @@ def reconstruct_sync(
         ``clock_offsets_s`` ({camera: s}), ``clocks`` (the full table), ``timestamp_s`` (per image, input
         order) and the time spent in each stage.
     """
-    from gttnet.baselines.registry import reconstruct
+    from gttnet.methods import reconstruct
 
     if solver not in SOLVERS:
         raise ValueError(f"sync: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -122,7 +122,7 @@ def reconstruct_auto(
     Returns:
         The chosen method's reconstruction; ``info["method_ran"]`` names it.
     """
-    from gttnet.baselines.registry import reconstruct
+    from gttnet.methods import reconstruct
 
     name, options = AUTO[obs.sequencing]
     if name == "sync":

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from gttdata.capture.views import make_view
-from gttnet.baselines import Reconstruction, available_methods, reconstruct, register_method
 from gttnet.baselines.highpass import difference_operator, fit_highpass
 from gttnet.baselines.trajectory_basis import dct_basis, fit_trajectory_basis
 from gttnet.errors import ModelError, SequencingError
 from gttnet.evaluate.metrics import mpjpe_mm
 from gttnet.io import load_input
+from gttnet.methods import Reconstruction, available_methods, reconstruct, register_method
 from tests.gttnet.test_importers import write_dloe_mat, write_gttnet_json
 
-BUILTIN = {"pseudo": "none", "dloe": "none", "dct": "full", "hpf": "full"}
+BUILTIN = {"pseudo": "none", "dloe": "none", "dct": "full", "hpf": "full", "gttnet": "none"}
 
 
 @pytest.fixture(scope="module")
@@ -61,15 +61,19 @@ def test_unknown_method_and_option(scene):
 
 def test_gttnet_without_model(scene):
     obs, _ = make_view(scene, "none")
-    if "gttnet" in available_methods():  # registered by gttnet.model.inference: a missing file is refused
-        with pytest.raises(ModelError, match="no trained model"):
-            reconstruct(obs, "gttnet", model="/nonexistent/model.pt")
-    else:
-        with pytest.raises(ModelError, match="no trained GTT-Net model"):
-            reconstruct(obs, "gttnet")
+    with pytest.raises(ModelError, match="no trained model"):
+        reconstruct(obs, "gttnet", model="/nonexistent/model.pt")
 
 
-def test_register_custom_method(scene):
+def test_register_custom_method(scene, monkeypatch):
+    from click.testing import CliRunner
+
+    import gttnet.methods
+    from gttnet.cli import main
+
+    available_methods()  # built-ins loaded, then a private copy of the registry for this test
+    monkeypatch.setattr(gttnet.methods, "_REGISTRY", dict(gttnet.methods._REGISTRY))
+
     @register_method("_test_zero", requires="partial")
     def _zero(obs):
         n = obs.n_images
@@ -81,6 +85,7 @@ def test_register_custom_method(scene):
     np.testing.assert_array_equal(rec.order, np.arange(obs.n_images))  # filled from the affinity
     with pytest.raises(SequencingError):
         reconstruct(make_view(scene, "none")[0], "_test_zero")
+    assert "_test_zero" in CliRunner().invoke(main, ["reconstruct", "--help"]).output  # the CLI lists it
 
 
 @pytest.mark.parametrize("method", ["pseudo", "dloe", "dct", "hpf"])

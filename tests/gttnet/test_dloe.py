@@ -7,11 +7,11 @@ import pytest
 from scipy.optimize import minimize
 
 from gttdata.capture.views import make_view
-from gttnet.baselines import reconstruct
 from gttnet.baselines._simplex import project_simplex, solve_simplex_qp
 from gttnet.baselines.dloe import DLOEParams, candidate_neighbours, d_step, mds_embedding, w_step
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
 from gttnet.geometry.triangulation import pseudo_triangulate
+from gttnet.methods import reconstruct
 
 
 @pytest.fixture(scope="module")

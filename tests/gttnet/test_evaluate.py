@@ -185,7 +185,7 @@ def test_resume_skips_done_jobs(tmp_path, monkeypatch):
         evaluate(recipe, progress=False, resume=False)
 
 
-def test_gttnet_q_option_sets_top_q_and_restores(tmp_path):
+def test_gttnet_top_q_option_leaves_the_cached_model_alone(tmp_path):
     from gttdata.capture.views import make_view
     from gttdata.generate_plan import build_sample
     from gttdata.recipe import load_recipe
@@ -196,13 +196,15 @@ def test_gttnet_q_option_sets_top_q_and_restores(tmp_path):
     path = save_model(tmp_path / "m.pt", build_model("gttnet_tiny"))
     obs, _ = make_view(build_sample(load_recipe("recipes/gttdata/tiny.yaml"), "test", 0)[0], "none")
     recs = {
-        q: run_mod.run_method(obs, MethodEntry(method="gttnet", options={"model": str(path), "q": q}))
+        q: run_mod.run_method(obs, MethodEntry(method="gttnet", options={"model": str(path), "top_q": q}))
         for q in (1, 3)
     }
     nnz = {q: int((r.affinity > 0).sum()) for q, r in recs.items()}
     assert nnz[1] < nnz[3] <= 3 * obs.n_images * 2
     assert recs[3].info["top_q"] == 3 and recs[3].order is not None
-    assert run_mod._gttnet_reconstructor(str(path)).model.affinity.top_q == 2
+    from gttnet.model.inference import cached_reconstructor
+
+    assert cached_reconstructor(str(path)).model.affinity.top_q == 2
 
 
 def test_runtime_study_tiny(tmp_path):

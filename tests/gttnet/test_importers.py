@@ -10,12 +10,12 @@ import scipy.io
 
 from gttdata.capture.sample import CaptureSample
 from gttdata.capture.views import make_view
-from gttnet.baselines.registry import Reconstruction
 from gttnet.errors import ImportFormatError, SequencingError
 from gttnet.io import detect_format, load_input
 from gttnet.io.dloe_mat import read_dloe_mat
 from gttnet.io.gttnet_json import read_gttnet_json
 from gttnet.io.output import read_reconstruction, write_reconstruction
+from gttnet.methods import Reconstruction
 
 INCH = 0.0254
 

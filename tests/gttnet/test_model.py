@@ -284,7 +284,7 @@ def test_ground_truth_never_reaches_inference(small_view, tmp_path):
 
 
 def test_gttnet_method_in_registry(small_view, tmp_path):
-    from gttnet.baselines.registry import available_methods, reconstruct
+    from gttnet.methods import available_methods, reconstruct
 
     torch.manual_seed(0)
     path = inference.save_model(tmp_path / "m.pt", build_model("gttnet_tiny", n_joints=5, k=6))
@@ -317,8 +317,8 @@ def test_full_sequencing_returns_timestamp_order_and_uses_the_timing(scene_facto
     Under full, the order is the timestamp order and the solver interpolates in time, so even an
     untrained network is no worse than DLOE, which is given the same timestamps.
     """
-    from gttnet.baselines.registry import reconstruct
     from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+    from gttnet.methods import reconstruct
 
     sample = scene_factory(n_cameras=3, n_joints=5, frames_per_camera=10, sigma_px=1.0, seed=7)
     obs, gt = make_view(sample, "full")
@@ -329,7 +329,7 @@ def test_full_sequencing_returns_timestamp_order_and_uses_the_timing(scene_facto
 
 
 def test_partial_sequencing_order_never_contradicts_a_stream(scene_factory, tiny_model_path):
-    from gttnet.baselines.registry import reconstruct
+    from gttnet.methods import reconstruct
 
     sample = scene_factory(n_cameras=3, n_joints=5, frames_per_camera=10, sigma_px=1.0, seed=8)
     obs, _ = make_view(sample, "partial")

@@ -95,7 +95,7 @@ def test_tiny_events_capture_ari_one():
 
 
 def test_method_without_affinity_is_refused(monkeypatch):
-    import gttnet.baselines.registry as reg
+    import gttnet.methods as reg
 
     class _Rec:
         affinity = None
