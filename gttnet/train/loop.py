@@ -3,20 +3,17 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import os
 import random
 import shutil
-import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
-import torch.distributed as dist
 import yaml
 from tqdm import tqdm
 
@@ -25,6 +22,7 @@ from gttnet.data import EpochStream, SequenceDataset, TrainItem, collate_items, 
 from gttnet.model.inference import load_model, save_model
 from gttnet.model.inputs import random_rotation
 from gttnet.model.network import GTTNet, build_model
+from gttnet.train import distributed
 from gttnet.train.checkpoint import (
     CHECKPOINT_NAME,
     LoopState,
@@ -32,14 +30,15 @@ from gttnet.train.checkpoint import (
     save_checkpoint,
     set_rng_states,
 )
-from gttnet.train.curves import plot_learning_curves
-from gttnet.train.objective import StepObjective, stage_losses
+from gttnet.train.objective import StepObjective
 from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
 from gttnet.train.rundir import open_run
-from gttnet.train.stages import Stage
+from gttnet.train.runlog import RunLog, git_sha, plot_loss_curve
+from gttnet.train.stages import Stage, freeze_parts
 from gttnet.train.threads import limit_cpu_threads
+from gttnet.train.validate import validate
 
-__all__ = ["RunResult", "select_device", "freeze_parts", "train"]
+__all__ = ["RunResult", "train"]
 
 log = logging.getLogger(__name__)
 
@@ -61,69 +60,6 @@ class RunResult:
     finished: bool
 
 
-def select_device(name: str, *, local_rank: int = 0) -> torch.device:
-    """``auto`` → CUDA when available (this process's local GPU under torchrun), else CPU."""
-    if name == "auto":
-        name = "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda":
-        if not torch.cuda.is_available():
-            raise ValueError("device 'cuda' requested but CUDA is not available; use --device cpu or auto")
-        return torch.device("cuda", local_rank)
-    return torch.device(name)
-
-
-def freeze_parts(model: GTTNet, frozen: list[str]) -> list[torch.nn.Parameter]:
-    """Freeze the named parts (see :data:`~gttnet.train.stages.FREEZABLE`); returns the trainable parameters."""
-    parts = {
-        "unet": [model.unet],
-        "encoder": [model.unet.encoders, model.unet.enc_norms],
-        "decoder": [model.unet.decoders, model.unet.dec_norms],
-        "pointnet": [model.pointnet.point_mlp, model.pointnet.head] if model.pointnet is not None else [],
-        "pointnet_decoders": [model.pointnet.decoders] if model.pointnet is not None else [],
-    }
-    for p in model.parameters():
-        p.requires_grad_(True)
-    for name in frozen:
-        for module in parts[name]:
-            for p in module.parameters():
-                p.requires_grad_(False)
-    return [p for p in model.parameters() if p.requires_grad]
-
-
-def _git_sha() -> str:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5, check=False
-        )
-        return out.stdout.strip() or "unknown"
-    except OSError:
-        return "unknown"
-
-
-class _Logger:
-    """JSONL records (and TensorBoard scalars when installed), written by rank 0 only."""
-
-    def __init__(self, run_dir: Path, enabled: bool) -> None:
-        self.enabled, self.path, self.tb = enabled, run_dir / "log.jsonl", None
-        if enabled:
-            try:
-                from torch.utils.tensorboard import SummaryWriter
-
-                self.tb = SummaryWriter(str(run_dir / "tensorboard"))
-            except ImportError:
-                log.debug("tensorboard not installed: JSONL log only")
-
-    def write(self, record: dict) -> None:
-        if not self.enabled:
-            return
-        with self.path.open("a") as fh:
-            fh.write(json.dumps(record) + "\n")
-        if self.tb is not None:
-            for k, v in record.items():
-                if isinstance(v, int | float) and k not in ("step", "global_step", "stage_index"):
-                    self.tb.add_scalar(f"{record['kind']}/{k}", v, record["global_step"])
-
-
 def _stage_length(stage: Stage, steps_per_epoch: int) -> int:
     return stage.steps if stage.steps is not None else stage.epochs * steps_per_epoch
 
@@ -135,67 +71,9 @@ def _lr(stage: Stage, state: LoopState, total: int) -> float:
     return state.lr
 
 
-@torch.no_grad()
-def _validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
-    """Stage loss, MPJPE of X^E and X_init (mean and median over sequences), and top-Q precision.
-
-    ``kept_precision`` is the fraction of kept A^S entries that link true temporal neighbours (binary
-    A^G): a solver-free measure of the learned affinity.
-    """
-    model.eval()
-    totals, mpjpe, mpjpe_init, precision = [], [], [], []
-    per_condition: dict[str, list[float]] = {}
-    parts_sum: dict[str, float] = {}
-    for item in items:
-        out = model([item.inputs], solve=True)
-        total, parts = stage_losses(stage, model, [item], out)
-        totals.append(float(total))
-        for k, v in parts.items():
-            parts_sum[k] = parts_sum.get(k, 0.0) + float(v) / len(items)
-        mpjpe.append(float((out[0].x_est - item.points3d).norm(dim=-1).mean()) * 1000.0)
-        per_condition.setdefault(item.inputs.sequencing, []).append(mpjpe[-1])
-        mpjpe_init.append(float((item.inputs.x_init - item.points3d).norm(dim=-1).mean()) * 1000.0)
-        aff = out[0].affinity
-        real = aff.mask.gather(1, aff.keep)
-        precision.append(float(item.target_binary.gather(1, aff.keep)[real].mean()) if real.any() else 0.0)
-    model.train()
-    return {
-        "loss": float(np.mean(totals)),
-        "mpjpe_mm": float(np.mean(mpjpe)),
-        "mpjpe_median_mm": float(np.median(mpjpe)),
-        "mpjpe_init_mm": float(np.mean(mpjpe_init)),
-        "mpjpe_init_median_mm": float(np.median(mpjpe_init)),
-        "kept_precision": float(np.mean(precision)),
-        **{f"mpjpe_{c}_mm": float(np.mean(v)) for c, v in per_condition.items()},
-        **{f"mpjpe_{c}_median_mm": float(np.median(v)) for c, v in per_condition.items()},
-        **{f"loss_{k}": v for k, v in parts_sum.items()},
-    }
-
-
-def _plot(run_dir: Path, history: list[dict]) -> None:
-    plot_learning_curves(history, run_dir / "loss_curve.png", title=run_dir.name)
-
-
-def _dist_setup(device_name: str) -> tuple[int, int, int]:
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    if world <= 1:
-        return 0, 1, 0
-    local = int(os.environ.get("LOCAL_RANK", "0"))
-    if not dist.is_initialized():
-        use_nccl = device_name != "cpu" and torch.cuda.is_available()
-        if use_nccl:
-            torch.cuda.set_device(local)
-        dist.init_process_group(backend="nccl" if use_nccl else "gloo")
-    return dist.get_rank(), dist.get_world_size(), local
-
-
-def _run_dir(recipe: TrainRecipe, out: str | Path | None, rank: int, world: int) -> Path:
-    path = [
-        str(out) if out else str(Path(recipe.out_dir) / f"{recipe.name}-{time.strftime('%Y%m%d-%H%M%S')}")
-    ]
-    if world > 1:
-        dist.broadcast_object_list(path, src=0)
-    return Path(path[0])
+def _run_dir(recipe: TrainRecipe, out: str | Path | None, world: int) -> Path:
+    default = Path(recipe.out_dir) / f"{recipe.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return distributed.agree_on_path(out if out else default, world)
 
 
 @dataclass
@@ -209,7 +87,7 @@ class _Context:
     dtype: torch.dtype
     rank: int
     world: int
-    logger: _Logger
+    logger: RunLog
     batches: object
     val_items: list[TrainItem]
     steps_per_epoch: int
@@ -219,17 +97,17 @@ def _prepare(
     recipe: TrainRecipe, payload: dict | None, out, device: str | None
 ) -> tuple[_Context, LoopState]:
     device_name = device or recipe.train.device
-    rank, world, local = _dist_setup(device_name)
-    dev = select_device(device_name, local_rank=local)
+    rank, world, local = distributed.setup(device_name)
+    dev = distributed.select_device(device_name, local_rank=local)
     if dev.type == "cpu":
         limit_cpu_threads(recipe.train.threads)
     dtype = torch.float64 if recipe.train.dtype == "float64" else torch.float32
-    run_dir = _run_dir(recipe, out, rank, world)
+    run_dir = _run_dir(recipe, out, world)
     if rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         if payload is None:
             (run_dir / "recipe.yaml").write_text(yaml.safe_dump(recipe_to_dict(recipe), sort_keys=False))
-    logger = _Logger(run_dir, rank == 0)
+    logger = RunLog(run_dir, rank == 0)
     random.seed(recipe.seed)
     np.random.seed(recipe.seed)  # noqa: NPY002 (third-party code may use the global generator)
     torch.manual_seed(recipe.seed)
@@ -247,7 +125,7 @@ def _prepare(
                 f"model.init {recipe.model.init}: architecture differs ({str(exc).splitlines()[0]})"
             ) from exc
     if payload is None:
-        logger.write({"kind": "meta", "global_step": 0, "git_sha": _git_sha(), "seed": recipe.seed,
+        logger.write({"kind": "meta", "global_step": 0, "git_sha": git_sha(), "seed": recipe.seed,
                       "device": str(dev), "world": world, "recipe": recipe_to_dict(recipe)})  # fmt: skip
     n_params = sum(p.numel() for p in model.parameters())
     log.info("run %s on %s (world %d): %d parameters", run_dir, dev, world, n_params)
@@ -316,7 +194,7 @@ def _step(ctx: _Context, step_fn, optimizer, trainable, stage: Stage, state: Loo
 
 
 def _validate_and_schedule(ctx: _Context, stage: Stage, si: int, state: LoopState, lr: float) -> None:
-    val = _validate(ctx.model, stage, ctx.val_items)
+    val = validate(ctx.model, stage, ctx.val_items)
     rec = {"kind": "val", "stage": stage.name, "stage_index": si, "step": state.stage_step,
            "global_step": state.global_step, "lr": lr, **val}  # fmt: skip
     state.history.append(rec)
@@ -336,26 +214,15 @@ def _save(ctx: _Context, optimizer, state: LoopState) -> None:
         )
 
 
-def _check_replicas(ctx: _Context) -> None:
-    """Under DDP every rank must end with the same weights (gradients were all-reduced)."""
-    if ctx.world <= 1:
-        return
-    total = torch.stack([p.detach().double().sum() for p in ctx.model.parameters()]).sum().reshape(1)
-    sums = [torch.zeros_like(total) for _ in range(ctx.world)]
-    dist.all_gather(sums, total)
-    if any(not torch.equal(s, sums[0]) for s in sums):
-        raise RuntimeError(f"DDP replicas diverged: parameter sums {[float(s) for s in sums]}")
-
-
 def _finish(ctx: _Context, state: LoopState) -> None:
-    _check_replicas(ctx)
+    distributed.check_replicas(ctx.model, ctx.world)
     if ctx.rank != 0:
         return
     last_val = next((r for r in reversed(state.history) if r["kind"] == "val"), {})
-    card = {"recipe": recipe_to_dict(ctx.recipe), "git_sha": _git_sha(), "steps": state.global_step,
+    card = {"recipe": recipe_to_dict(ctx.recipe), "git_sha": git_sha(), "steps": state.global_step,
             "validation": last_val, "trained_on": str(ctx.dev), "world": ctx.world}  # fmt: skip
     save_model(ctx.run_dir / "model.pt", ctx.model, card=card)
-    _plot(ctx.run_dir, state.history)
+    plot_loss_curve(ctx.run_dir, state.history)
     shutil.rmtree(ctx.run_dir / "item_cache", ignore_errors=True)
 
 
@@ -420,12 +287,7 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
         else:
             state.stage_step, state.lr, state.best_val, state.bad_vals = 0, stage.lr, float("inf"), 0
         payload = None
-        step_fn = objective
-        if ctx.world > 1:
-            ids = [ctx.dev.index] if ctx.dev.type == "cuda" else None
-            step_fn = torch.nn.parallel.DistributedDataParallel(
-                objective, device_ids=ids, find_unused_parameters=True
-            )
+        step_fn = distributed.wrap(objective, ctx.dev, ctx.world)
         t_last, seqs, window = time.perf_counter(), 0, []
         while state.stage_step < total:
             if max_steps is not None and done_here >= max_steps:

@@ -2,16 +2,30 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-__all__ = ["Stage", "LOSS_NAMES", "AFFINITY_TARGETS", "FREEZABLE", "SCHEDULES"]
+if TYPE_CHECKING:
+    import torch
+
+    from gttnet.model.network import GTTNet
+
+__all__ = ["Stage", "LOSS_NAMES", "AFFINITY_TARGETS", "FREEZABLE", "SCHEDULES", "freeze_parts"]
 
 #: Loss names a stage may weight: ℓ^AE, ℓ^A, ℓ^X, ℓ^S, ℓ^P.
 LOSS_NAMES: tuple[str, ...] = ("autoencoding", "affinity", "structure", "smoothness", "pointnet")
 #: A^G used by ℓ^A: ground-truth interpolation weights, 0/1 temporal adjacency, or observation-only labels.
 AFFINITY_TARGETS: tuple[str, ...] = ("continuous", "binary", "pseudo")
-#: Model parts a stage may freeze.
-FREEZABLE: tuple[str, ...] = ("unet", "encoder", "decoder", "pointnet", "pointnet_decoders")
+#: Model parts a stage may freeze, each mapped to the modules of a :class:`GTTNet` it names (the one
+#: source of truth: recipe validation checks names against its keys, :func:`freeze_parts` uses its values).
+FREEZABLE: Mapping[str, Callable[[GTTNet], list[torch.nn.Module]]] = {
+    "unet": lambda m: [m.unet],
+    "encoder": lambda m: [m.unet.encoders, m.unet.enc_norms],
+    "decoder": lambda m: [m.unet.decoders, m.unet.dec_norms],
+    "pointnet": lambda m: [m.pointnet.point_mlp, m.pointnet.head] if m.pointnet is not None else [],
+    "pointnet_decoders": lambda m: [m.pointnet.decoders] if m.pointnet is not None else [],
+}
 #: Learning-rate schedules.
 SCHEDULES: tuple[str, ...] = ("plateau", "constant", "cosine")
 
@@ -68,9 +82,22 @@ class Stage:
                 raise ValueError(f"stage {self.name!r}: {key} must be one of {allowed}, got {value!r}")
         bad = sorted(set(self.frozen) - set(FREEZABLE))
         if bad:
-            raise ValueError(f"stage {self.name!r}: cannot freeze {bad[0]!r}; expected one of {FREEZABLE}")
+            raise ValueError(
+                f"stage {self.name!r}: cannot freeze {bad[0]!r}; expected one of {tuple(FREEZABLE)}"
+            )
 
     @property
     def needs_solver(self) -> bool:
         """Whether a loss of this stage needs the DLOE layer's X^E."""
         return any(self.losses.get(k, 0.0) != 0.0 for k in ("structure", "smoothness"))
+
+
+def freeze_parts(model: GTTNet, frozen: list[str]) -> list[torch.nn.Parameter]:
+    """Freeze the named parts (keys of :data:`FREEZABLE`), unfreeze the rest; returns the trainable parameters."""
+    for p in model.parameters():
+        p.requires_grad_(True)
+    for name in frozen:
+        for module in FREEZABLE[name](model):
+            for p in module.parameters():
+                p.requires_grad_(False)
+    return [p for p in model.parameters() if p.requires_grad]

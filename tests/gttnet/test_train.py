@@ -14,9 +14,9 @@ import torch
 
 from gttnet.data import EpochStream, SequenceDataset, affinity_targets, open_source, prepare_item
 from gttnet.train.checkpoint import load_checkpoint
-from gttnet.train.loop import freeze_parts, train
+from gttnet.train.loop import train
 from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_recipe
-from gttnet.train.stages import Stage
+from gttnet.train.stages import Stage, freeze_parts
 
 REPO = Path(__file__).resolve().parents[2]
 ALL_YAML = sorted((REPO / "recipes" / "gttnet").glob("*.yaml"))
