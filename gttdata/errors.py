@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import functools
+
+import click
+
 __all__ = [
+    "friendly_errors",
     "GttDataError",
     "MotionFormatError",
     "RecipeError",
@@ -63,3 +68,23 @@ class KeypointFormatError(GttDataError):
 
 class CalibrationError(RigError):
     """A calibration file is malformed, in unknown units, or disagrees with the keypoint sources."""
+
+
+def friendly_errors(fn):
+    """Decorator: turn library errors (and common OS errors) into one readable ClickException line."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except GttDataError as exc:
+            raise click.ClickException(str(exc)) from exc
+        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+            raise click.ClickException(f"{exc.filename}: {exc.strerror}") from exc
+        except OSError as exc:  # ENOSPC, EROFS...: one line naming the path
+            from gttdata.fileio import describe_os_error  # fileio imports this module
+
+            reason = describe_os_error(exc)
+            raise click.ClickException(f"{exc.filename}: {reason}" if exc.filename else reason) from exc
+
+    return wrapper

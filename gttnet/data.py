@@ -204,13 +204,12 @@ def _open_one(spec, split: str):
         return RecipeSource(gen, split)
     root = Path(spec.root or gen.output_dir)
     if not any(root.glob("**/*.h5")):
-        from gttdata.cli import main as gttdata_main
+        from gttdata.generation import generate_dataset
 
         log.info("no shards under %s: generating them from %s", root, spec.generate)
-        args = ["generate", spec.generate, *spec.overrides, "--resume"]  # keeps what a killed run wrote
         if spec.root:
-            args.append(f"output_dir={root}")
-        gttdata_main(args, standalone_mode=False)
+            gen = load_recipe(spec.generate, [*spec.overrides, f"output_dir={root}"])
+        generate_dataset(gen, resume=True, progress=False)  # keeps what a killed run wrote
     if spec.manifest is not None:
         check_registered(root, spec.manifest)
     return ShardSource(root, split)

@@ -17,12 +17,9 @@ loads any of them, and ``benchmarks/bench_startup.py`` times ``--help``.
 
 from __future__ import annotations
 
-import functools
-
 import click
 
-from gttdata.errors import GttDataError
-from gttdata.fileio import describe_os_error
+from gttdata.errors import friendly_errors
 
 __all__ = ["main", "friendly_errors"]
 
@@ -38,24 +35,6 @@ def _versions() -> str:
         except md.PackageNotFoundError:
             out.append(f"{n} (not installed)")
     return ", ".join(out)
-
-
-def friendly_errors(fn):
-    """Decorator: turn library errors (and common OS errors) into one readable ClickException line."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except GttDataError as exc:
-            raise click.ClickException(str(exc)) from exc
-        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-            raise click.ClickException(f"{exc.filename}: {exc.strerror}") from exc
-        except OSError as exc:  # ENOSPC, EROFS...: one line naming the path
-            reason = describe_os_error(exc)
-            raise click.ClickException(f"{exc.filename}: {reason}" if exc.filename else reason) from exc
-
-    return wrapper
 
 
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
@@ -78,16 +57,8 @@ def main() -> None:
     """Simulate unsynchronized multi-camera captures from mocap and write them as HDF5 shards."""
 
 
-def _register() -> None:
-    """Attach subcommands; each module adds itself to ``main``. Missing modules are skipped."""
-    for mod in ("motions", "generate", "inspect", "verify", "preview", "export"):
-        try:
-            importlib_module = __import__(f"gttdata.cli.{mod}", fromlist=["register"])
-        except ModuleNotFoundError as exc:
-            if exc.name != f"gttdata.cli.{mod}":
-                raise
-            continue
-        importlib_module.register(main)
+# Each subcommand module adds itself to ``main`` (imported after ``main`` exists; a missing one fails loudly).
+from gttdata.cli import export, generate, inspect, motions, preview, verify  # noqa: E402
 
-
-_register()
+for _module in (motions, generate, inspect, verify, preview, export):
+    _module.register(main)

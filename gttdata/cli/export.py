@@ -6,13 +6,13 @@ from pathlib import Path
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["export_cmd", "register"]
 
 
 def _read_sample(source: Path, split: str, sample: int, variant: str):
-    from gttdata.shards.collection import DatasetReader
+    from gttdata.dataset import DatasetReader
     from gttdata.shards.reader import ShardReader
 
     reader = ShardReader(source) if source.is_file() else DatasetReader(source, split)

@@ -11,12 +11,12 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gttdata.cli import friendly_errors
 from gttdata.cli.inspect import (  # light: both import only click at module level
     dataset_summary,
     format_summary,
 )
 from gttdata.cli.verify import repo_manifests_dir
+from gttdata.errors import friendly_errors
 
 if TYPE_CHECKING:
     from gttdata.manifest import Manifest
@@ -26,7 +26,7 @@ __all__ = ["generate_cmd", "register"]
 
 def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> list[Path]:
     """Render the first ``n`` samples of the first split with gttdata.preview.render, when installed."""
-    from gttdata.shards.collection import DatasetReader
+    from gttdata.dataset import DatasetReader
 
     try:
         from gttdata.preview.render import render_samples

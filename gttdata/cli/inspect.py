@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 if TYPE_CHECKING:
     from gttdata.manifest import Manifest

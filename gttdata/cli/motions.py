@@ -8,8 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gttdata.cli import friendly_errors
-from gttdata.errors import GttDataError
+from gttdata.errors import GttDataError, friendly_errors
 
 if TYPE_CHECKING:
     from gttdata.mocap.motion import Motion

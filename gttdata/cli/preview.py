@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["preview_cmd", "register"]
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["manifest_cmd", "register", "repo_manifests_dir", "verify_cmd"]
 

@@ -115,7 +115,7 @@ def open_source(path: str | Path, split: str | None = None) -> SampleSource:
     Raises:
         ManifestError, ShardFormatError: Not a readable dataset or shard.
     """
-    from gttdata.shards.collection import DatasetReader
+    from gttdata.dataset import DatasetReader
     from gttdata.shards.reader import ShardReader
 
     path = Path(path)

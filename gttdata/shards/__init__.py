@@ -1,4 +1,4 @@
-"""HDF5 shards of CaptureSamples: layout (schema), writer and reader; DatasetReader lives in ``gttdata.shards.collection``."""
+"""HDF5 shards of CaptureSamples: layout (schema), writer and reader; DatasetReader lives in ``gttdata.dataset``."""
 
 from __future__ import annotations
 

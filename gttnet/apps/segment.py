@@ -10,7 +10,13 @@ import scipy.linalg
 from scipy.cluster.vq import kmeans2
 from scipy.special import comb
 
-from gttnet.geometry.ordering import graph_components, spectral_order
+from gttnet.geometry.ordering import (
+    graph_components,
+    normalised_laplacian,
+    spectral_embedding,
+    spectral_order,
+    symmetrise,
+)
 
 __all__ = [
     "Segmentation",
@@ -76,37 +82,6 @@ def adjusted_rand_index(labels_true: np.ndarray, labels_pred: np.ndarray) -> flo
     return float((sum_ij - expected) / (top - expected))
 
 
-def _symmetric(A: np.ndarray) -> np.ndarray:
-    A = np.asarray(A, dtype=np.float64)
-    if A.ndim != 2 or A.shape[0] != A.shape[1]:
-        raise ValueError(f"affinity must have shape (N, N), got {A.shape}")
-    S = 0.5 * (np.abs(A) + np.abs(A).T)
-    np.fill_diagonal(S, 0.0)
-    return S
-
-
-def _normalised_laplacian(S: np.ndarray) -> np.ndarray:
-    d = S.sum(axis=1)
-    inv = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 0.0)
-    return np.eye(S.shape[0]) - inv[:, None] * S * inv[None, :]
-
-
-def spectral_embedding(A: np.ndarray, k: int) -> np.ndarray:
-    """The ``k`` eigenvectors of the smallest eigenvalues of the normalised Laplacian of ``(A + A^T)/2``.
-
-    Args:
-        A: Non-negative affinity, shape ``(N, N)``.
-        k: Embedding dimension.
-
-    Returns:
-        Coordinates, shape ``(N, k)`` (column 0 is the trivial one on a connected graph).
-    """
-    S = _symmetric(A)
-    k = max(1, min(k, S.shape[0]))
-    _, vec = scipy.linalg.eigh(_normalised_laplacian(S), subset_by_index=[0, k - 1])
-    return vec
-
-
 def estimate_n_clusters(A: np.ndarray, *, max_k: int = 8, min_ratio: float = 8.0) -> int:
     """Number of weakly linked groups from the largest relative gap of the normalised Laplacian spectrum.
 
@@ -117,9 +92,9 @@ def estimate_n_clusters(A: np.ndarray, *, max_k: int = 8, min_ratio: float = 8.0
     Returns:
         Estimated number of clusters in ``[1, max_k]``.
     """
-    S = _symmetric(A)
+    S = symmetrise(A)
     m = min(max_k + 1, S.shape[0])
-    vals = scipy.linalg.eigh(_normalised_laplacian(S), eigvals_only=True, subset_by_index=[0, m - 1])
+    vals = scipy.linalg.eigh(normalised_laplacian(S), eigvals_only=True, subset_by_index=[0, m - 1])
     vals = np.maximum(vals, 1e-12)
     ratios = vals[2:] / vals[1:-1]  # lambda_1 = 0 always; ratios[i] = lambda_{i+3} / lambda_{i+2} (1-based)
     if ratios.size == 0:
@@ -200,7 +175,7 @@ def segment_events(
     Returns:
         The :class:`Segmentation`.
     """
-    S = _symmetric(affinity)
+    S = symmetrise(affinity)
     n = S.shape[0]
     min_size = max(3, n // 50) if min_size is None else min_size
     labels = _attach_small(graph_components(S), features, min_size)

@@ -54,16 +54,8 @@ def main() -> None:
     """Reconstruct dynamic 3D skeletons from unsynchronized multi-camera 2-D observations."""
 
 
-def _register() -> None:
-    """Attach subcommands; each module adds itself to ``main``. Missing modules are skipped."""
-    for mod in ("reconstruct", "sync", "train", "evaluate", "segment", "render", "export_json"):
-        try:
-            module = __import__(f"gttnet.cli.{mod}", fromlist=["register"])
-        except ModuleNotFoundError as exc:
-            if exc.name != f"gttnet.cli.{mod}":
-                raise
-            continue
-        module.register(main)
+# Each subcommand module adds itself to ``main`` (imported after ``main`` exists; a missing one fails loudly).
+from gttnet.cli import evaluate, export_json, reconstruct, render, segment, sync, train  # noqa: E402
 
-
-_register()
+for _module in (reconstruct, sync, train, evaluate, segment, render, export_json):
+    _module.register(main)

@@ -6,7 +6,7 @@ import logging
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["register", "evaluate_cmd"]
 

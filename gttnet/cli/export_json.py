@@ -6,7 +6,7 @@ import json
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["export_json_cmd", "register"]
 

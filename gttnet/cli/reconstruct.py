@@ -9,8 +9,7 @@ from pathlib import Path
 
 import click
 
-from gttdata.cli import friendly_errors
-from gttdata.errors import RigError
+from gttdata.errors import RigError, friendly_errors
 
 __all__ = ["register", "reconstruct_cmd"]
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["register", "segment_cmd", "load_capture"]
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 from gttnet.errors import GttNetError
 
 if TYPE_CHECKING:

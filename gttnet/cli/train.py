@@ -7,7 +7,7 @@ import os
 
 import click
 
-from gttdata.cli import friendly_errors
+from gttdata.errors import friendly_errors
 
 __all__ = ["register", "train_command"]
 

@@ -131,7 +131,7 @@ def plot_affinity(
     S = 0.5 * (A + A.T)
     idx = np.lexsort((order, labels))
     if embedding is None:
-        from gttnet.apps.segment import spectral_embedding
+        from gttnet.geometry.ordering import spectral_embedding
 
         embedding = spectral_embedding(S, 3)[:, 1:]
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(9.0, 4.2))

@@ -9,7 +9,15 @@ import scipy.linalg
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["graph_components", "spectral_order", "stream_consistent_order", "timestamp_order"]
+__all__ = [
+    "graph_components",
+    "normalised_laplacian",
+    "spectral_embedding",
+    "spectral_order",
+    "stream_consistent_order",
+    "symmetrise",
+    "timestamp_order",
+]
 
 log = logging.getLogger(__name__)
 
@@ -201,3 +209,36 @@ def stream_consistent_order(rank: np.ndarray, cam_id: np.ndarray, stream_index: 
         members = by_stream[cam[by_stream] == c]
         out[members] = np.sort(r[members])
     return out
+
+
+def symmetrise(A: np.ndarray) -> np.ndarray:
+    """``(|A| + |A|^T) / 2`` with a zero diagonal, shape ``(N, N)`` (no sign or finiteness check)."""
+    A = np.asarray(A, dtype=np.float64)
+    if A.ndim != 2 or A.shape[0] != A.shape[1]:
+        raise ValueError(f"affinity must have shape (N, N), got {A.shape}")
+    S = 0.5 * (np.abs(A) + np.abs(A).T)
+    np.fill_diagonal(S, 0.0)
+    return S
+
+
+def normalised_laplacian(S: np.ndarray) -> np.ndarray:
+    """``I - D^-1/2 S D^-1/2`` of a symmetric affinity ``S`` (isolated images get a zero row), ``(N, N)``."""
+    d = S.sum(axis=1)
+    inv = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 0.0)
+    return np.eye(S.shape[0]) - inv[:, None] * S * inv[None, :]
+
+
+def spectral_embedding(A: np.ndarray, k: int) -> np.ndarray:
+    """The ``k`` eigenvectors of the smallest eigenvalues of the normalised Laplacian of ``(A + A^T)/2``.
+
+    Args:
+        A: Non-negative affinity, shape ``(N, N)``.
+        k: Embedding dimension.
+
+    Returns:
+        Coordinates, shape ``(N, k)`` (column 0 is the trivial one on a connected graph).
+    """
+    S = symmetrise(A)
+    k = max(1, min(k, S.shape[0]))
+    _, vec = scipy.linalg.eigh(normalised_laplacian(S), subset_by_index=[0, k - 1])
+    return vec

@@ -14,7 +14,7 @@ def read_shard_sample(path: str | Path, *, sample: int = 0, variant: str = "orig
     """Read one capture from a shard file or a dataset directory.
 
     A file is read with ``gttdata.shards.reader.ShardReader`` (``sample`` = index inside the file); a
-    directory holding ``manifest.json`` with ``gttdata.shards.collection.DatasetReader`` over all its
+    directory holding ``manifest.json`` with ``gttdata.dataset.DatasetReader`` over all its
     splits in manifest order (``sample`` = global index).
 
     Args:
@@ -29,7 +29,7 @@ def read_shard_sample(path: str | Path, *, sample: int = 0, variant: str = "orig
         ImportFormatError: If the reader is unavailable, the sample index or variant does not exist.
     """
     try:
-        from gttdata.shards.collection import DatasetReader
+        from gttdata.dataset import DatasetReader
         from gttdata.shards.reader import ShardReader
     except ModuleNotFoundError as exc:
         raise ImportFormatError(

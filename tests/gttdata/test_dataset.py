@@ -10,10 +10,9 @@ import numpy as np
 import pytest
 
 from gttdata.capture.views import GroundTruth, Observations
-from gttdata.dataset import CaptureDataset
+from gttdata.dataset import CaptureDataset, DatasetReader
 from gttdata.generation import generate_dataset
 from gttdata.recipe import load_recipe
-from gttdata.shards.collection import DatasetReader
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import json
 
 import pytest
 
+from gttdata.dataset import DatasetReader
 from gttdata.errors import ManifestError
 from gttdata.generation import generate_dataset
 from gttdata.manifest import (
@@ -19,7 +20,6 @@ from gttdata.manifest import (
     verify_manifest,
 )
 from gttdata.recipe import load_recipe
-from gttdata.shards.collection import DatasetReader
 from gttdata.shards.schema import SCHEMA_VERSION
 
 TINY = "recipes/gttdata/tiny.yaml"

@@ -153,8 +153,8 @@ def mixed_dataset(tmp_path_factory):
 
 
 def test_mixed_topology_shards_round_trip(mixed_dataset):
+    from gttdata.dataset import DatasetReader
     from gttdata.manifest import load_manifest
-    from gttdata.shards.collection import DatasetReader
 
     root, recipe = mixed_dataset
     reader = DatasetReader(root, "train")
@@ -187,8 +187,8 @@ def test_loader_and_collate_handle_mixed_joint_counts(mixed_dataset):
 
 
 def test_previews_of_every_family_are_not_blank(mixed_dataset):
+    from gttdata.dataset import DatasetReader
     from gttdata.preview.overlay import crop_windows, draw_overlay
-    from gttdata.shards.collection import DatasetReader
 
     root, _ = mixed_dataset
     reader = DatasetReader(root, "train")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from gttnet.data import EpochStream, SequenceDataset, affinity_targets, open_source, prepare_item
+from gttnet.data import EpochStream, SequenceDataset, _open_one, affinity_targets, open_source, prepare_item
 from gttnet.train.checkpoint import load_checkpoint
 from gttnet.train.loop import train
 from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_recipe
@@ -341,3 +341,15 @@ def test_validation_per_condition_and_learning_curves(tmp_path):
     assert _stages(history) == [(0, "affinity", 0), (1, "dloe", 3)]
     assert (tmp_path / "run" / "loss_curve.png").is_file()
     assert plot_learning_curves(history, tmp_path / "again.png") == tmp_path / "again.png"
+
+
+def test_shard_source_generates_missing_shards_through_the_library(tmp_path):
+    from gttnet.train.recipe import SourceSpec
+
+    spec = SourceSpec(kind="shards", root=str(tmp_path / "shards"))
+    src = _open_one(spec, "train")
+    recipe_src = _open_one(SourceSpec(kind="recipe"), "train")
+    assert (tmp_path / "shards" / "manifest.json").is_file() and len(src) == len(recipe_src) > 0
+    a, _ = src.view(0, "full", "orig")
+    b, _ = recipe_src.view(0, "full", "orig")
+    np.testing.assert_array_equal(a.keypoints_px, b.keypoints_px)
