@@ -12,6 +12,7 @@ __all__ = [
     "MotionFormatError",
     "RecipeError",
     "RigError",
+    "SequencingError",
     "ShardFormatError",
     "ManifestError",
     "OutputError",
@@ -36,6 +37,10 @@ class RecipeError(GttDataError):
 
 class RigError(GttDataError):
     """A camera or rig is invalid (singular K, non-orthonormal rotation, zero image size...)."""
+
+
+class SequencingError(GttDataError):
+    """A view or method needs sequencing information (stream order, global order) the input lacks."""
 
 
 class ShardFormatError(GttDataError):

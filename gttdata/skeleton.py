@@ -10,7 +10,7 @@ import numpy as np
 
 from gttdata.errors import MotionFormatError
 
-__all__ = ["Skeleton", "cmu31", "CMU31_JOINTS", "CMU31_BVH_ALIASES", "load_skeleton"]
+__all__ = ["Skeleton", "cmu31", "CMU31_JOINTS", "CMU31_BVH_ALIASES", "default_skeleton", "load_skeleton"]
 
 #: CMU-31 joints in ASF order (shared/REFERENCE.md).
 CMU31_JOINTS: tuple[str, ...] = (
@@ -211,3 +211,22 @@ def load_skeleton(path: str | Path) -> Skeleton:
     if not isinstance(d, dict):
         raise MotionFormatError(f"{path}: expected a JSON object, found {type(d).__name__}")
     return Skeleton.from_dict(d, source=str(path))
+
+
+def default_skeleton(n_joints: int, prefix: str) -> Skeleton:
+    """CMU-31 for 31 joints, else a star topology named ``<prefix><J>`` (joints ``j0..``, joint 0 the root).
+
+    For captures whose files name no skeleton (imported layouts, synthetic test scenes).
+
+    Example:
+        >>> sk = default_skeleton(3, "imported")
+        >>> sk.name, sk.parents
+        ('imported3', (-1, 0, 0))
+    """
+    if n_joints == 31:
+        return cmu31()
+    return Skeleton(
+        name=f"{prefix}{n_joints}",
+        joint_names=tuple(f"j{i}" for i in range(n_joints)),
+        parents=(-1,) + (0,) * (n_joints - 1),
+    )

@@ -1,8 +1,11 @@
-"""Exception types raised by gttnet; the CLI turns each into one readable line."""
+"""Exception types raised by gttnet; the CLI turns each into one readable line.
+
+``SequencingError`` is gttdata's (views raise it too), re-exported here.
+"""
 
 from __future__ import annotations
 
-from gttdata.errors import GttDataError
+from gttdata.errors import GttDataError, SequencingError
 
 __all__ = ["GttNetError", "ImportFormatError", "SequencingError", "ModelError", "SingularStructureError"]
 
@@ -13,10 +16,6 @@ class GttNetError(GttDataError):
 
 class ImportFormatError(GttNetError):
     """A reconstruction input file is malformed (names file, field, expected and found)."""
-
-
-class SequencingError(GttNetError):
-    """A method needs sequencing information the input does not have."""
 
 
 class ModelError(GttNetError):

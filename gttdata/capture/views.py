@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
-from gttdata.capture.sample import CaptureSample, affinity_from_neighbours
-from gttdata.errors import RigError
+from gttdata.capture.sample import affinity_from_neighbours
+from gttdata.errors import RigError, SequencingError
 from gttdata.skeleton import Skeleton
 
-__all__ = ["SEQUENCING", "Observations", "GroundTruth", "make_view"]
+__all__ = ["SEQUENCING", "Observations", "GroundTruth", "ViewableCapture", "make_view", "view_permutation"]
 
 #: The three sequencing conditions of the paper.
 SEQUENCING: tuple[str, ...] = ("none", "partial", "full")
@@ -151,73 +152,158 @@ class GroundTruth:
         return affinity_from_neighbours(self.affinity_nbr, self.affinity_w, binary=False)
 
 
-def _view_permutation(sample: CaptureSample, sequencing: str, seed: int | None) -> np.ndarray:
-    n = sample.n_images
-    if sequencing == "full":
-        return np.argsort(sample.timestamp_s, kind="stable")
-    if sequencing == "partial":
-        return np.lexsort((sample.stream_index, sample.cam_id))
-    s = zlib.crc32(sample.name.encode()) if seed is None else seed
-    return np.random.default_rng(s).permutation(n)
+class ViewableCapture(Protocol):
+    """What :func:`make_view` needs of a capture, every array in stored image order (N images, J joints).
 
-
-def _stream_times(sample: CaptureSample, perm: np.ndarray) -> np.ndarray | None:
-    """Per-image times on each camera's own clock, or None.
-
-    What each camera's own clock says of its images: ``frame / fps`` at the camera's nominal rate, with
-    the camera's frame counter (gaps where frames were dropped), from the capture parameters in ``meta``;
-    None when ``meta`` does not record the rates. Offsets, drift and jitter are not in it (they are what
-    clock recovery estimates).
+    :class:`~gttdata.capture.sample.CaptureSample` (simulated) and imported captures
+    (``gttnet.io.ImportedCapture``) both provide it. A capture with a ``meta`` dict recording its
+    cameras' frame rates (simulated ones) also gives the views each camera's own clock.
     """
-    fps = sample.meta.get("capture", {}).get("fps_hz") if isinstance(sample.meta, dict) else None
-    if not fps or len(fps) <= int(sample.cam_id.max(initial=0)):
+
+    @property
+    def name(self) -> str:
+        """Capture name; seeds the default ``none`` permutation."""
+
+    @property
+    def skeleton(self) -> Skeleton:
+        """Joint topology (J joints)."""
+
+    @property
+    def cam_id(self) -> np.ndarray:
+        """Camera of each image, shape ``(N,)`` int."""
+
+    @property
+    def stream_index(self) -> np.ndarray:
+        """Index within the camera stream, shape ``(N,)`` int."""
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsics per image, pixels, shape ``(N, 3, 3)``."""
+
+    @property
+    def cam_from_world(self) -> np.ndarray:
+        """World→camera transform per image, metres, shape ``(N, 4, 4)``."""
+
+    @property
+    def keypoints_px(self) -> np.ndarray:
+        """2-D joints, pixels, shape ``(N, J, 2)``; NaN where missing."""
+
+    @property
+    def visible(self) -> np.ndarray:
+        """Observed-joint mask, shape ``(N, J)`` bool."""
+
+    @property
+    def image_size(self) -> np.ndarray:
+        """``(width, height)`` per camera, shape ``(V, 2)``."""
+
+    @property
+    def timestamp_s(self) -> np.ndarray | None:
+        """Capture times, seconds (time ranks for files with an order but no clock), ``(N,)``; None: unknown."""
+
+    @property
+    def points3d(self) -> np.ndarray | None:
+        """Ground-truth joints in world, metres, shape ``(N, J, 3)``, or None when unknown."""
+
+    @property
+    def global_order(self) -> np.ndarray:
+        """Rank of each image in true time, shape ``(N,)``; -1 where unknown."""
+
+    @property
+    def affinity_nbr(self) -> np.ndarray:
+        """Temporal neighbours (stored indices), shape ``(N, 2)``, -1 where none."""
+
+    @property
+    def affinity_w(self) -> np.ndarray:
+        """Interpolation weights of those neighbours, shape ``(N, 2)``."""
+
+
+def view_permutation(capture: ViewableCapture, sequencing: str, seed: int | None = None) -> np.ndarray:
+    """Stored index of each view image under a sequencing condition, shape ``(N,)``.
+
+    ``full`` sorts by time, ``partial`` groups by camera in stream order, ``none`` permutes at random
+    (seeded by ``seed``, else by the capture's name, so a view is reproducible).
+
+    Raises:
+        SequencingError: ``full`` for a capture without a global order.
+    """
+    if sequencing == "full":
+        if capture.timestamp_s is None:
+            raise SequencingError(
+                f"{capture.name}: sequencing 'full' needs the global image order, which the file does not "
+                "hold; use --sequencing partial or none"
+            )
+        return np.argsort(capture.timestamp_s, kind="stable")
+    if sequencing == "partial":
+        return np.lexsort((capture.stream_index, capture.cam_id))
+    s = zlib.crc32(capture.name.encode()) if seed is None else seed
+    return np.random.default_rng(s).permutation(capture.cam_id.shape[0])
+
+
+def _stream_times(capture: ViewableCapture, perm: np.ndarray) -> np.ndarray | None:
+    """What each camera's own clock says of its images, or None.
+
+    ``frame / fps`` at the camera's nominal rate, with the camera's frame counter (gaps where frames were
+    dropped), from the capture parameters in ``meta`` (simulated captures); None when the capture has no
+    ``meta`` recording the rates. Offsets, drift and jitter are not in it (they are what clock recovery
+    estimates).
+    """
+    meta = getattr(capture, "meta", None)
+    fps = meta.get("capture", {}).get("fps_hz") if isinstance(meta, dict) else None
+    if not fps or len(fps) <= int(capture.cam_id.max(initial=0)):
         return None
-    frame = np.asarray(sample.meta.get("frame_number", sample.stream_index), dtype=np.float64)
-    if frame.shape != sample.cam_id.shape:
+    frame = np.asarray(meta.get("frame_number", capture.stream_index), dtype=np.float64)
+    if frame.shape != capture.cam_id.shape:
         return None
-    return (frame / np.asarray(fps, dtype=np.float64)[sample.cam_id])[perm]
+    return (frame / np.asarray(fps, dtype=np.float64)[capture.cam_id])[perm]
 
 
 def make_view(
-    sample: CaptureSample, sequencing: str, *, seed: int | None = None
+    capture: ViewableCapture, sequencing: str, *, seed: int | None = None
 ) -> tuple[Observations, GroundTruth]:
-    """Split a sample into solver inputs and ground truth for one sequencing condition.
+    """Split a capture into solver inputs and ground truth for one sequencing condition.
 
     Args:
-        sample: The stored capture.
+        capture: A stored capture (any :class:`ViewableCapture`).
         sequencing: ``"none"``, ``"partial"`` or ``"full"``.
-        seed: Seed of the random image permutation under ``"none"`` (default: from the sample name,
+        seed: Seed of the random image permutation under ``"none"`` (default: from the capture name,
             so a view is reproducible).
 
     Returns:
-        ``(observations, ground_truth)``, both in the view's image order.
+        ``(observations, ground_truth)``, both in the view's image order; the ground truth is None
+        (typed as present, since simulated captures always have it) when ``capture.points3d`` is None.
+
+    Raises:
+        SequencingError: ``full`` for a capture without a global order.
     """
     if sequencing not in SEQUENCING:
         raise ValueError(f"sequencing must be one of {SEQUENCING}, got {sequencing!r}")
-    perm = _view_permutation(sample, sequencing, seed)
-    inv = np.empty_like(perm)
-    inv[perm] = np.arange(perm.shape[0])
-    nbr = sample.affinity_nbr[perm]
-    nbr = np.where(nbr >= 0, inv[np.maximum(nbr, 0)], -1).astype(np.int32)
+    perm = view_permutation(capture, sequencing, seed)
+    times = capture.timestamp_s
     obs = Observations(
         sequencing=sequencing,
-        skeleton=sample.skeleton,
-        cam_id=sample.cam_id[perm].copy(),
-        K=sample.K[perm].copy(),
-        cam_from_world=sample.cam_from_world[perm].copy(),
-        keypoints_px=sample.keypoints_px[perm].copy(),
-        visible=sample.visible[perm].copy(),
-        image_size=np.asarray(sample.image_size).copy(),
-        stream_index=None if sequencing == "none" else sample.stream_index[perm].copy(),
-        timestamp_s=sample.timestamp_s[perm].copy() if sequencing == "full" else None,
-        stream_time_s=None if sequencing == "none" else _stream_times(sample, perm),
+        skeleton=capture.skeleton,
+        cam_id=capture.cam_id[perm].copy(),
+        K=capture.K[perm].copy(),
+        cam_from_world=capture.cam_from_world[perm].copy(),
+        keypoints_px=capture.keypoints_px[perm].copy(),
+        visible=capture.visible[perm].copy(),
+        image_size=np.asarray(capture.image_size).copy(),
+        stream_index=None if sequencing == "none" else capture.stream_index[perm].copy(),
+        timestamp_s=times[perm].astype(np.float64) if sequencing == "full" else None,
+        stream_time_s=None if sequencing == "none" else _stream_times(capture, perm),
     )
+    if capture.points3d is None:
+        return obs, None  # type: ignore[return-value]
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.shape[0])
+    nbr = capture.affinity_nbr[perm]
+    nbr = np.where(nbr >= 0, inv[np.maximum(nbr, 0)], -1).astype(np.int32)
     gt = GroundTruth(
-        points3d=sample.points3d[perm].copy(),
-        timestamp_s=sample.timestamp_s[perm].copy(),
-        global_order=sample.global_order[perm].copy(),
+        points3d=capture.points3d[perm].copy(),
+        timestamp_s=np.full(perm.shape[0], np.nan) if times is None else times[perm].astype(np.float64),
+        global_order=capture.global_order[perm].copy(),
         affinity_nbr=nbr,
-        affinity_w=sample.affinity_w[perm].copy(),
+        affinity_w=capture.affinity_w[perm].copy(),
         perm=perm,
     )
     return obs, gt

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gttdata.capture.views import GroundTruth, Observations, make_view
+from gttdata.capture.views import GroundTruth, Observations, make_view, view_permutation
 from gttnet.errors import ImportFormatError
-from gttnet.io._views import UNITS, ImportedCapture, make_imported_view, view_permutation
+from gttnet.io._views import UNITS, ImportedCapture
 
 __all__ = ["FORMATS", "UNITS", "LoadedInput", "detect_format", "load_input"]
 
@@ -125,11 +125,11 @@ def load_input(
         from gttnet.io.shards import read_shard_sample
 
         cap = read_shard_sample(path, sample=sample, variant=variant)
-        obs, gt = make_view(cap, sequencing or "full", seed=seed)
-        index = gt.perm
+        sequencing = sequencing or "full"
     else:
-        foreign = _read_foreign(path, fmt, units)
-        obs, gt = make_imported_view(foreign, sequencing or foreign.best_sequencing, seed=seed)
-        index = view_permutation(foreign, obs.sequencing, seed)
+        cap = _read_foreign(path, fmt, units)
+        sequencing = sequencing or cap.best_sequencing
+    obs, gt = make_view(cap, sequencing, seed=seed)
+    index = view_permutation(cap, sequencing, seed)
     log.info("%s (%s): %d images, sequencing %s", path, fmt, obs.n_images, obs.sequencing)
     return LoadedInput(obs, gt, np.asarray(index, dtype=np.int64), str(path), fmt, units)

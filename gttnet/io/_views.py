@@ -1,37 +1,28 @@
-"""Imported captures and their sequencing views, mirroring gttdata's make_view for files from other tools."""
+"""Captures imported from other tools' files, in the shape :func:`gttdata.capture.views.make_view` takes."""
 
 from __future__ import annotations
 
-import zlib
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from gttdata.capture.sample import temporal_affinity
-from gttdata.capture.views import SEQUENCING, GroundTruth, Observations
-from gttdata.skeleton import Skeleton, cmu31
-from gttnet.errors import SequencingError
+from gttdata.skeleton import Skeleton
 
-__all__ = ["UNITS", "ImportedCapture", "default_skeleton", "make_imported_view", "view_permutation"]
+__all__ = ["UNITS", "ImportedCapture"]
 
 #: Length units accepted by the importers, in metres.
 UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "inch": 0.0254}
 
 
-def default_skeleton(n_joints: int) -> Skeleton:
-    """CMU-31 for 31 joints, else a star topology named ``imported<J>`` (joint 0 the root)."""
-    if n_joints == 31:
-        return cmu31()
-    return Skeleton(
-        name=f"imported{n_joints}",
-        joint_names=tuple(f"j{i}" for i in range(n_joints)),
-        parents=(-1,) + (0,) * (n_joints - 1),
-    )
-
-
 @dataclass(frozen=True)
 class ImportedCapture:
     """A capture read from a foreign file, in its stored image order, lengths already in metres.
+
+    It is a :class:`~gttdata.capture.views.ViewableCapture`: ``make_view(capture, sequencing)`` gives its
+    solver inputs and ground truth. Foreign files carry an order but no clock, so ``timestamp_s`` holds
+    each image's time *rank* (unit: one image interval), which is what the order-based methods use.
 
     Args:
         source: File name, for messages and the default ``none`` permutation seed.
@@ -69,77 +60,38 @@ class ImportedCapture:
         """The richest sequencing condition this capture supports (``full`` only with a known order)."""
         return "full" if self.time_rank is not None else "partial"
 
+    @property
+    def name(self) -> str:
+        """The file name (seeds the default ``none`` permutation)."""
+        return self.source
 
-def view_permutation(cap: ImportedCapture, sequencing: str, seed: int | None = None) -> np.ndarray:
-    """Stored index of each view image under a sequencing condition (see :func:`make_imported_view`)."""
-    if sequencing == "full":
-        if cap.time_rank is None:
-            raise SequencingError(
-                f"{cap.source}: sequencing 'full' needs the global image order, which the file does not hold; "
-                "use --sequencing partial or none"
-            )
-        return np.argsort(cap.time_rank, kind="stable")
-    if sequencing == "partial":
-        return np.lexsort((cap.stream_index, cap.cam_id))
-    s = zlib.crc32(cap.source.encode()) if seed is None else seed
-    return np.random.default_rng(s).permutation(cap.n_images)
+    @property
+    def timestamp_s(self) -> np.ndarray | None:
+        """Time rank of each image as float, shape ``(N,)``, or None without a global order."""
+        return None if self.time_rank is None else self.time_rank.astype(np.float64)
 
+    @property
+    def global_order(self) -> np.ndarray:
+        """Rank of each image in true time, shape ``(N,)`` int64; -1 without a global order."""
+        if self.time_rank is None:
+            return np.full(self.n_images, -1, dtype=np.int64)
+        return self.time_rank.astype(np.int64)
 
-def _ground_truth(cap: ImportedCapture, perm: np.ndarray) -> GroundTruth | None:
-    if cap.points3d is None:
-        return None
-    n = cap.n_images
-    X = cap.points3d[perm]
-    if cap.time_rank is None:
-        # No time order in the file: MPJPE can be scored, sequence recovery cannot.
-        return GroundTruth(
-            points3d=X,
-            timestamp_s=np.full(n, np.nan),
-            global_order=np.full(n, -1, dtype=np.int64),
-            affinity_nbr=np.full((n, 2), -1, dtype=np.int32),
-            affinity_w=np.zeros((n, 2)),
-            perm=perm,
-        )
-    rank = cap.time_rank[perm].astype(np.int64)
-    # The filled-in X (missing joints included) is exactly what GroundTruth describes; fine for A^G.
-    nbr, w = temporal_affinity(rank.astype(np.float64), cap.cam_id[perm], np.nan_to_num(X))
-    return GroundTruth(
-        points3d=X,
-        timestamp_s=rank.astype(np.float64),
-        global_order=rank,
-        affinity_nbr=nbr,
-        affinity_w=w,
-        perm=perm,
-    )
+    @functools.cached_property
+    def _affinity(self) -> tuple[np.ndarray, np.ndarray]:
+        n = self.n_images
+        if self.time_rank is None or self.points3d is None:
+            # No time order in the file: MPJPE can be scored, sequence recovery cannot.
+            return np.full((n, 2), -1, dtype=np.int32), np.zeros((n, 2))
+        # The filled-in X (missing joints included) is exactly what GroundTruth describes; fine for A^G.
+        return temporal_affinity(self.time_rank.astype(np.float64), self.cam_id, np.nan_to_num(self.points3d))
 
+    @property
+    def affinity_nbr(self) -> np.ndarray:
+        """Temporal neighbours (stored indices) from the file's order, shape ``(N, 2)``, -1 where none."""
+        return self._affinity[0]
 
-def make_imported_view(
-    cap: ImportedCapture, sequencing: str, *, seed: int | None = None
-) -> tuple[Observations, GroundTruth | None]:
-    """Solver inputs (and ground truth, when the file has it) for one sequencing condition.
-
-    As :func:`gttdata.capture.views.make_view`: ``none`` permutes the images at random (seeded by the
-    file name unless ``seed`` is given), ``partial`` groups them by camera in stream order, ``full``
-    sorts them by the file's global order. Foreign files carry an order but no clock, so under
-    ``full`` the observations' ``timestamp_s`` holds each image's time *rank* (unit: one image
-    interval), which is what the order-based methods use.
-
-    Raises:
-        SequencingError: ``full`` requested for a file without a global order.
-    """
-    if sequencing not in SEQUENCING:
-        raise ValueError(f"sequencing must be one of {SEQUENCING}, got {sequencing!r}")
-    perm = view_permutation(cap, sequencing, seed)
-    obs = Observations(
-        sequencing=sequencing,
-        skeleton=cap.skeleton,
-        cam_id=cap.cam_id[perm].copy(),
-        K=cap.K[perm].copy(),
-        cam_from_world=cap.cam_from_world[perm].copy(),
-        keypoints_px=cap.keypoints_px[perm].copy(),
-        visible=cap.visible[perm].copy(),
-        image_size=np.asarray(cap.image_size).copy(),
-        stream_index=None if sequencing == "none" else cap.stream_index[perm].copy(),
-        timestamp_s=cap.time_rank[perm].astype(np.float64) if sequencing == "full" else None,
-    )
-    return obs, _ground_truth(cap, perm)
+    @property
+    def affinity_w(self) -> np.ndarray:
+        """Interpolation weights of those neighbours, shape ``(N, 2)``."""
+        return self._affinity[1]

@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
+from gttdata.skeleton import default_skeleton
 from gttnet.errors import ImportFormatError
-from gttnet.io._views import UNITS, ImportedCapture, default_skeleton
+from gttnet.io._views import UNITS, ImportedCapture
 
 __all__ = ["read_dloe_mat"]
 
@@ -159,7 +160,7 @@ def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
     log.info("%s: %d images, %d joints, %d cameras (units %s)", path, n, p, cam.max() + 1, units)
     return ImportedCapture(
         source=str(path),
-        skeleton=default_skeleton(p),
+        skeleton=default_skeleton(p, "imported"),
         cam_id=cam,
         stream_index=stream,
         K=K,

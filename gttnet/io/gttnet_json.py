@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gttdata.skeleton import Skeleton
+from gttdata.skeleton import Skeleton, default_skeleton
 from gttnet.errors import ImportFormatError
-from gttnet.io._views import UNITS, ImportedCapture, default_skeleton
+from gttnet.io._views import UNITS, ImportedCapture
 
 __all__ = ["RAY_FOCAL_PX", "read_gttnet_json", "rays_to_pixels", "skeleton_from_limbs", "write_gttnet_json"]
 
@@ -311,7 +311,7 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
         size = np.round(2.0 * K[:, :2, 2]).astype(np.int32)
     rank = _time_rank(path, d, n)
     limbs = _limbs(path, d, p)
-    skeleton = default_skeleton(p) if limbs is None else skeleton_from_limbs(limbs, p)
+    skeleton = default_skeleton(p, "imported") if limbs is None else skeleton_from_limbs(limbs, p)
     centres = C.T * scale
     T = np.tile(np.eye(4), (n, 1, 1))
     T[:, :3, :3] = R[cam]
