@@ -6,11 +6,16 @@ import hashlib
 import json
 from collections.abc import Sequence
 from pathlib import Path
-
-import yaml
+from typing import TypeVar
 
 from gttdata.errors import RecipeError
-from gttdata.recipe._parse import apply_overrides, build_dataclass, to_plain
+from gttdata.recipe._parse import (
+    apply_overrides,
+    build_dataclass,
+    read_yaml_mapping,
+    resolve_paths,
+    to_plain,
+)
 from gttdata.recipe.param import PARAM_KINDS, Param
 from gttdata.recipe.schema import (
     MAX_IMAGES_PER_SAMPLE,
@@ -27,7 +32,11 @@ from gttdata.recipe.schema import (
     SplitSpec,
 )
 
+R = TypeVar("R")
+
 __all__ = [
+    "apply_overrides",
+    "build_dataclass",
     "AugmentSpec",
     "CaptureSpec",
     "FileRigSpec",
@@ -191,37 +200,30 @@ def parse_recipe(data: dict | None, *, source: str = "<recipe>") -> GenerateReci
     return recipe
 
 
-def load_recipe(path: str | Path, overrides: Sequence[str] = ()) -> GenerateRecipe:
-    """Read a YAML recipe, apply ``key.sub=value`` overrides, and validate everything before any work.
+def load_recipe(path: str | Path, overrides: Sequence[str] = (), *, cls: type[R] = GenerateRecipe) -> R:  # type: ignore[assignment]
+    """Read a YAML recipe of any kind, apply ``key.sub=value`` overrides, and validate it before any work.
+
+    The one loader of gtt recipes: ``gttdata generate`` recipes (the default), training recipes
+    (``cls=gttnet.train.recipe.TrainRecipe``) and evaluation recipes (``cls=EvalRecipe``). Relative
+    paths of the files a recipe reads (fields marked ``path``) resolve against the recipe file's folder;
+    paths given in ``overrides`` stay relative to the working directory, as typed in a shell.
 
     Args:
         path: The YAML file.
         overrides: Strings like ``capture.sigma_px=4`` or ``splits.train.n_samples=10``; each value is
             parsed as a YAML scalar (or flow collection, e.g. ``capture.fps_hz=[30,15]``).
+        cls: The recipe class; it provides ``from_mapping(data, overrides, source)``.
 
     Returns:
-        The validated recipe.
+        The validated recipe (frozen).
 
     Raises:
         RecipeError: e.g. ``recipe.yaml: capture.sigma_px: expected a number >= 0 or a distribution, found 'abc'``.
     """
-    source = str(path)
-    try:
-        text = Path(path).read_text()
-    except FileNotFoundError as exc:
-        raise RecipeError(f"{source}: recipe file not found") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}: " if mark is not None else ""
-        raise RecipeError(f"{source}: {where}not valid YAML ({getattr(exc, 'problem', exc)})") from exc
-    data = {} if data is None else data
-    if not isinstance(data, dict):
-        raise RecipeError(
-            f"{source}: <top>: expected a mapping of recipe sections, found {type(data).__name__}"
-        )
-    return parse_recipe(apply_overrides(data, overrides, source), source=source)
+    error = getattr(cls, "recipe_error", RecipeError)
+    data = read_yaml_mapping(path, error=error)
+    data = resolve_paths(cls, data, Path(path).resolve().parent)
+    return cls.from_mapping(data, overrides, str(path))  # type: ignore[attr-defined]
 
 
 def recipe_to_dict(recipe: GenerateRecipe) -> dict:

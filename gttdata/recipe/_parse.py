@@ -1,19 +1,38 @@
-"""Strict conversion of a YAML mapping into recipe dataclasses, raising one-line RecipeErrors."""
+"""The one YAML-to-dataclass builder of every gtt recipe (generate, train, evaluate), with one-line errors.
+
+Field types may be nested dataclasses (a union of them is told apart by a ``kind`` field), ``list[T]``,
+``tuple[T, ...]``, ``dict[str, T]``, ``T | None``, ``Any``, :class:`~gttdata.recipe.param.Param` and the
+scalars bool, int, float, str. Field metadata adds checks: ``ge``/``gt``/``le``/``lt`` ranges,
+``integer``, ``choices``, ``nonempty``, ``pattern``, ``allow_list`` (Param) and ``path`` (a file the
+recipe reads: resolved against the recipe file's folder by :func:`resolve_paths`).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 import types
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import yaml
 
 from gttdata.errors import RecipeError
 from gttdata.recipe.param import Param
 
-__all__ = ["apply_overrides", "build_dataclass", "to_plain"]
+__all__ = [
+    "Shorthand",
+    "apply_overrides",
+    "build_dataclass",
+    "read_yaml_mapping",
+    "resolve_paths",
+    "to_plain",
+]
+
+#: Rewrites a raw value before it is converted to a type, e.g. a scalar shorthand for a mapping.
+Shorthand = Callable[[object, object], object]
 
 _DIST_KINDS = ("uniform", "choice", "normal")
 
@@ -45,13 +64,19 @@ def _number_text(meta: dict) -> str:
 
 
 class _Ctx:
-    """Where the values come from, for error messages."""
+    """Where the values come from (for error messages), the error type raised and the shorthand hook."""
 
-    def __init__(self, source: str) -> None:
-        self.source = source
+    def __init__(
+        self, source: str, error: type[RecipeError] = RecipeError, shorthand: Shorthand | None = None
+    ) -> None:
+        self.source, self.error, self.shorthand = source, error, shorthand
+
+    def at(self, key: str, text: str) -> RecipeError:
+        prefix = f"{self.source}: " if self.source else ""
+        return self.error(f"{prefix}{key}: {text}")
 
     def fail(self, key: str, expected: str, found: object) -> RecipeError:
-        return RecipeError(f"{self.source}: {key}: expected {expected}, found {found!r}")
+        return self.at(key, f"expected {expected}, found {found!r}")
 
 
 def _check_number(ctx: _Ctx, key: str, v: object, meta: dict, expected: str) -> float:
@@ -126,6 +151,8 @@ def _convert_scalar(ctx: _Ctx, key: str, tp: type, v: object, meta: dict) -> obj
         if not (isinstance(v, dict) and all(isinstance(k, str) for k in v)):
             raise ctx.fail(key, "a mapping of names to values", v)
         return dict(v)
+    if tp is typing.Any:
+        return v
     raise TypeError(f"recipe field {key}: unsupported type {tp!r}")
 
 
@@ -140,6 +167,20 @@ def _convert_union(ctx: _Ctx, key: str, members: tuple, v: object) -> object:
     return build_dataclass(kinds[kind], v, key, ctx)
 
 
+def _convert_tuple(ctx: _Ctx, key: str, args: tuple, v: object, meta: dict) -> tuple:
+    if not isinstance(v, list | tuple):
+        raise ctx.fail(key, "a list", v)
+    if len(args) == 2 and args[1] is Ellipsis:
+        if meta.get("nonempty") and not v:
+            raise ctx.fail(key, "a non-empty list", v)
+        return tuple(_convert(ctx, f"{key}[{i}]", args[0], x, {}) for i, x in enumerate(v))
+    if len(v) != len(args):
+        raise ctx.fail(key, f"a list of {len(args)} values", v)
+    return tuple(
+        _convert(ctx, f"{key}[{i}]", a, x, meta) for i, (a, x) in enumerate(zip(args, v, strict=True))
+    )
+
+
 def _convert(ctx: _Ctx, key: str, tp: object, v: object, meta: dict) -> object:
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
@@ -149,38 +190,51 @@ def _convert(ctx: _Ctx, key: str, tp: object, v: object, meta: dict) -> object:
         if len(rest) == 1:
             return _convert(ctx, key, rest[0], v, meta)
         return _convert_union(ctx, key, rest, v)
+    if ctx.shorthand is not None:
+        v = ctx.shorthand(tp, v)
     if tp is Param:
         return _convert_param(ctx, key, v, meta)
     if dataclasses.is_dataclass(tp):
         return build_dataclass(tp, v, key, ctx)
-    if origin is tuple:
-        if not isinstance(v, list | tuple):
+    if origin is list:
+        if not isinstance(v, list):
             raise ctx.fail(key, "a list", v)
-        if len(args) == 2 and args[1] is Ellipsis:
-            if meta.get("nonempty") and not v:
-                raise ctx.fail(key, "a non-empty list", v)
-            return tuple(_convert(ctx, f"{key}[{i}]", args[0], x, {}) for i, x in enumerate(v))
-        if len(v) != len(args):
-            raise ctx.fail(key, f"a list of {len(args)} values", v)
-        return tuple(
-            _convert(ctx, f"{key}[{i}]", a, x, meta) for i, (a, x) in enumerate(zip(args, v, strict=True))
-        )
+        if meta.get("nonempty") and not v:
+            raise ctx.fail(key, "a non-empty list", v)
+        return [_convert(ctx, f"{key}.{i}", args[0], x, {}) for i, x in enumerate(v)]
+    if origin is dict:
+        if not (isinstance(v, dict) and all(isinstance(k, str) for k in v)):
+            raise ctx.fail(key, "a mapping of names to values", v)
+        return {k: _convert(ctx, f"{key}.{k}", args[1], x, {}) for k, x in v.items()}
+    if origin is tuple:
+        return _convert_tuple(ctx, key, args, v, meta)
     return _convert_scalar(ctx, key, tp, v, meta)
 
 
-def build_dataclass(cls: type, data: object, key: str, ctx: _Ctx | str) -> object:
+def build_dataclass(
+    cls: type,
+    data: object,
+    key: str = "",
+    ctx: _Ctx | str = "",
+    *,
+    error: type[RecipeError] = RecipeError,
+    shorthand: Shorthand | None = None,
+) -> typing.Any:
     """Build ``cls`` from a mapping, checking every key, type and range.
 
     Args:
         cls: A recipe dataclass.
         data: The YAML mapping (None means all defaults).
         key: Dotted key of ``data`` in the recipe (``""`` at the top).
-        ctx: The recipe's file name (or a context carrying it).
+        ctx: The recipe's file name, first word of every message ("" for none), or a context.
+        error: The :class:`~gttdata.errors.RecipeError` subclass raised.
+        shorthand: Optional ``(type, value) -> value`` hook applied before each conversion.
 
     Raises:
-        RecipeError: One line naming the file, the key, what was expected and what was found.
+        RecipeError: One line naming the file, the key, what was expected and what was found (also
+            for a value the dataclass's ``__post_init__`` rejects with ValueError or TypeError).
     """
-    ctx = _Ctx(ctx) if isinstance(ctx, str) else ctx
+    ctx = _Ctx(ctx, error, shorthand) if isinstance(ctx, str) else ctx
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise ctx.fail(key or "<top>", f"a mapping of {cls.__name__} fields", data)
@@ -188,16 +242,109 @@ def build_dataclass(cls: type, data: object, key: str, ctx: _Ctx | str) -> objec
     hints = typing.get_type_hints(cls)
     for k in data:
         if k not in fields:
-            where = f"{key}.{k}" if key else str(k)
-            raise RecipeError(f"{ctx.source}: {where}: unknown key (expected one of: {', '.join(fields)})")
+            raise ctx.at(
+                f"{key}.{k}" if key else str(k), f"unknown key (expected one of: {', '.join(fields)})"
+            )
     values = {}
     for name, f in fields.items():
         sub = f"{key}.{name}" if key else name
         if name in data:
             values[name] = _convert(ctx, sub, hints[name], data[name], dict(f.metadata))
-        elif f.metadata.get("nonempty"):
+        elif f.metadata.get("nonempty") or (
+            f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        ):
             raise ctx.fail(sub, "a value (this key is required)", None)
-    return cls(**values)
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as exc:
+        raise ctx.at(key or "recipe", str(exc)) from exc
+
+
+def read_yaml_mapping(path: str | Path, *, error: type[RecipeError] = RecipeError) -> dict:
+    """The top-level mapping of a YAML recipe file (an empty file is an empty mapping).
+
+    Raises:
+        RecipeError: ``<path>: recipe file not found``, invalid YAML (with its line), or not a mapping.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError as exc:
+        raise error(f"{source}: recipe file not found") from exc
+    except IsADirectoryError as exc:
+        raise error(f"{source}: expected a recipe file, found a directory") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        raise error(f"{source}: {where}not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise error(f"{source}: <top>: expected a mapping of recipe sections, found {type(data).__name__}")
+    return data
+
+
+def _resolve(value: object, base: Path) -> object:
+    if (
+        not isinstance(value, str)
+        or not value
+        or value.startswith(("$", "~", "cache:"))
+        or os.path.isabs(value)
+    ):
+        return value
+    return os.path.normpath(base / value)
+
+
+def resolve_paths(cls: type, data: object, base: str | Path) -> object:
+    """Resolve the relative file paths a raw recipe mapping names against ``base`` (its file's folder).
+
+    Fields marked ``path`` in their metadata are rewritten (``str`` or lists of ``str``); nested
+    dataclasses, lists of them and ``kind``-tagged unions are walked. Absolute paths and ones starting
+    with ``$``, ``~`` or ``cache:`` (the motion cache) are left as written. Values not matching the schema are left for
+    :func:`build_dataclass` to report.
+
+    Args:
+        cls: The recipe dataclass ``data`` describes.
+        data: Raw YAML data (not modified).
+        base: The recipe file's folder.
+
+    Returns:
+        A copy of ``data`` with the marked paths resolved.
+    """
+    if not (dataclasses.is_dataclass(cls) and isinstance(data, dict)):
+        return data
+    base = Path(base)
+    hints = typing.get_type_hints(cls)
+    out = dict(data)
+    for f in dataclasses.fields(cls):
+        if f.name not in data:
+            continue
+        v = data[f.name]
+        if f.metadata.get("path"):
+            out[f.name] = [_resolve(x, base) for x in v] if isinstance(v, list) else _resolve(v, base)
+        else:
+            out[f.name] = _resolve_nested(hints[f.name], v, base)
+    return out
+
+
+def _resolve_nested(tp: object, v: object, base: Path) -> object:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        members = [a for a in args if dataclasses.is_dataclass(a)]
+        if isinstance(v, dict) and members:
+            kinds = {
+                m.__dataclass_fields__["kind"].default: m for m in members if "kind" in m.__dataclass_fields__
+            }
+            chosen = kinds.get(v.get("kind"), members[0]) if kinds else members[0]
+            return resolve_paths(chosen, v, base)
+        others = [a for a in args if a is not type(None)]
+        return _resolve_nested(others[0], v, base) if len(others) == 1 else v
+    if dataclasses.is_dataclass(tp):
+        return resolve_paths(tp, v, base)
+    if origin in (list, tuple) and isinstance(v, list) and args:
+        return [_resolve_nested(args[0], x, base) for x in v]
+    return v
 
 
 def to_plain(obj: object) -> object:

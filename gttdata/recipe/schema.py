@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from gttdata.recipe.param import Param
@@ -101,7 +102,8 @@ class FileSource:
     """Motions read from files with :func:`gttdata.mocap.load_motion`.
 
     Paths may be globs; ``cache:`` as a prefix means the motion cache of ``gttdata motions fetch``, and
-    ``$VARS`` are expanded; other relative paths are relative to the working directory.
+    ``$VARS`` are expanded; other relative paths in a recipe file are relative to that file's folder
+    (:func:`gttdata.recipe.load_recipe`), those given as overrides to the working directory.
 
     Args:
         kind: Always ``files``.
@@ -116,7 +118,7 @@ class FileSource:
     """
 
     kind: str = _f("files", choices=("files",))
-    paths: tuple[str, ...] = _f((), nonempty=True)
+    paths: tuple[str, ...] = _f((), nonempty=True, path=True)
     format: str = "auto"
     trim_start_s: float = _f(0.0, ge=0)
     trim_end_s: float = _f(0.0, ge=0)
@@ -175,11 +177,11 @@ class FileRigSpec:
 
     Args:
         kind: Always ``file``.
-        path: Rig file (``.toml`` aniposelib layout or ``.json``).
+        path: Rig file (``.toml`` aniposelib layout or ``.json``); relative to the recipe file's folder.
     """
 
     kind: str = _f("file", choices=("file",))
-    path: str = _f("", nonempty=True)
+    path: str = _f("", nonempty=True, path=True)
 
 
 @dataclass(frozen=True)
@@ -311,3 +313,13 @@ class GenerateRecipe:
     scene: SceneSpec = _f(None, factory=SceneSpec)
     motion_augment: MotionAugmentSpec = _f(None, factory=MotionAugmentSpec)
     augmentations: tuple[AugmentSpec, ...] = ()
+
+    @classmethod
+    def from_mapping(cls, data: dict, overrides: Sequence[str] = (), source: str = "") -> GenerateRecipe:
+        """Apply ``key.sub=value`` overrides to a raw mapping, then build and validate the recipe."""
+        from gttdata.recipe import parse_recipe
+        from gttdata.recipe._parse import apply_overrides
+
+        return parse_recipe(
+            apply_overrides(data, overrides, source or "<recipe>"), source=source or "<recipe>"
+        )

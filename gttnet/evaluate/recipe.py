@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import copy
-import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import yaml
+from typing import Any, ClassVar
 
 from gttdata.capture.views import SEQUENCING
-from gttdata.recipe import apply_overrides
-from gttnet._typed_yaml import build_dataclass
-from gttnet.errors import GttNetError
+from gttdata.errors import RecipeError
+from gttdata.recipe import apply_overrides, build_dataclass, load_recipe
 
 __all__ = [
     "EvalRecipeError",
@@ -30,11 +27,11 @@ __all__ = [
 ]
 
 
-class EvalRecipeError(GttNetError):
+class EvalRecipeError(RecipeError):
     """An evaluation recipe is malformed (names the key, what was expected and what was found)."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class DataSpec:
     """Where the test sequences come from: a generate recipe built in memory, or a dataset directory.
 
@@ -47,8 +44,8 @@ class DataSpec:
         variant: Stored variant to evaluate (``"orig"`` or an augmentation name).
     """
 
-    generate: str | None = None
-    dataset: str | None = None
+    generate: str | None = field(default=None, metadata={"path": True})
+    dataset: str | None = field(default=None, metadata={"path": True})
     split: str = "test"
     n_sequences: int | None = None
     overrides: list[str] = field(default_factory=list)
@@ -61,7 +58,7 @@ class DataSpec:
             raise ValueError(f"n_sequences must be >= 1, got {self.n_sequences}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SweepValue:
     """One value of a sweep and the extra generate-recipe overrides it needs.
 
@@ -73,10 +70,10 @@ class SweepValue:
 
     value: float
     overrides: list[str] = field(default_factory=list)
-    dataset: str | None = None
+    dataset: str | None = field(default=None, metadata={"path": True})
 
 
-@dataclass
+@dataclass(frozen=True)
 class SweepSpec:
     """One swept variable, each value applied as a generate-recipe override with the others at default.
 
@@ -95,7 +92,7 @@ class SweepSpec:
     scale: float = 1.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class MethodEntry:
     """A method column of the evaluation: a registered method plus options.
 
@@ -108,17 +105,17 @@ class MethodEntry:
 
     name: str = ""
     method: str = ""
-    options: dict[str, typing.Any] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
     note: str = ""
 
     def __post_init__(self) -> None:
         if not self.method and not self.name:
             raise ValueError("a method entry needs method (or name)")
-        self.method = self.method or self.name
-        self.name = self.name or self.method
+        object.__setattr__(self, "method", self.method or self.name)
+        object.__setattr__(self, "name", self.name or self.method)
 
 
-@dataclass
+@dataclass(frozen=True)
 class RuntimeSpec:
     """The runtime study: time per sequence against the number of images (paper Fig. 5a).
 
@@ -137,16 +134,16 @@ class RuntimeSpec:
 
     lengths: list[int] = field(default_factory=lambda: [100, 200, 300, 400, 500, 600])
     methods: list[str] = field(default_factory=lambda: ["dloe", "gttnet"])
-    generate: str = "recipes/gttdata/paper.yaml"
+    generate: str = field(default="recipes/gttdata/paper.yaml", metadata={"path": True})
     split: str = "test"
     repeats: int = 1
     sequences: int = 1
     sequencing: str = "none"
-    model: str | None = None
+    model: str | None = field(default=None, metadata={"path": True})
     device: str = "cpu"
 
 
-@dataclass
+@dataclass(frozen=True)
 class EvalRecipe:
     """A full evaluation: data, sweeps, sequencing conditions, methods and outputs.
 
@@ -176,6 +173,14 @@ class EvalRecipe:
     plot_statistic: str = "mean"
     seed: int | None = None
     runtime: RuntimeSpec | None = None
+
+    #: The error type :func:`gttdata.recipe.load_recipe` raises for this recipe.
+    recipe_error: ClassVar[type[RecipeError]] = EvalRecipeError
+
+    @classmethod
+    def from_mapping(cls, data: dict, overrides: Sequence[str] = (), source: str = "") -> EvalRecipe:
+        """:func:`parse_eval_recipe` (the hook :func:`gttdata.recipe.load_recipe` calls)."""
+        return parse_eval_recipe(data, overrides, source)
 
     def __post_init__(self) -> None:
         bad = [s for s in self.sequencing if s not in SEQUENCING]
@@ -229,43 +234,30 @@ def _shorthand(tp: object, value: object) -> object:
     return value
 
 
-def parse_eval_recipe(data: dict, overrides: Sequence[str] = ()) -> EvalRecipe:
+def parse_eval_recipe(data: dict, overrides: Sequence[str] = (), source: str = "") -> EvalRecipe:
     """Validate a raw recipe mapping (``sweeps: paper`` expands to :data:`PAPER_SWEEPS`).
+
+    Args:
+        data: Plain recipe data (not modified).
+        overrides: ``key.sub=value`` strings.
+        source: The recipe file, first word of every message ("" for none).
 
     Raises:
         EvalRecipeError: One line naming the key.
     """
-    data = dict(data)
+    data = copy.deepcopy(dict(data))
     for step in range(2):  # expand before the overrides (so they can index it) and after (sweeps=paper)
         if data.get("sweeps") == "paper":
             data["sweeps"] = copy.deepcopy(PAPER_SWEEPS)
         if step == 0:
-            data = apply_overrides(data, overrides, "evaluation recipe", error=EvalRecipeError)
-    return build_dataclass(EvalRecipe, data, error=EvalRecipeError, shorthand=_shorthand)
+            data = apply_overrides(data, overrides, source or "evaluation recipe", error=EvalRecipeError)
+    return build_dataclass(EvalRecipe, data, "", source, error=EvalRecipeError, shorthand=_shorthand)
 
 
 def load_eval_recipe(path: str | Path, overrides: Sequence[str] = ()) -> EvalRecipe:
-    """Read and validate an evaluation recipe.
-
-    Args:
-        path: YAML file.
-        overrides: ``key.sub=value`` strings.
-
-    Returns:
-        The validated :class:`EvalRecipe`.
+    """``load_recipe(path, overrides, cls=EvalRecipe)`` (relative file paths resolve against its folder).
 
     Raises:
-        EvalRecipeError: e.g. ``eval_smoke.yaml: data.n_seq: unknown key; expected one of ...``.
+        EvalRecipeError: e.g. ``eval_smoke.yaml: data.n_seq: unknown key (expected one of: ...)``.
     """
-    try:
-        data = yaml.safe_load(Path(path).read_text())
-    except FileNotFoundError as exc:
-        raise EvalRecipeError(f"{path}: recipe file not found") from exc
-    except yaml.YAMLError as exc:
-        raise EvalRecipeError(f"{path}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
-    if not isinstance(data, dict):
-        raise EvalRecipeError(f"{path}: expected a mapping at the top level, found {type(data).__name__}")
-    try:
-        return parse_eval_recipe(data, overrides)
-    except EvalRecipeError as exc:
-        raise EvalRecipeError(f"{Path(path).name}: {exc}") from exc
+    return load_recipe(path, overrides, cls=EvalRecipe)

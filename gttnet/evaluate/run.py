@@ -76,12 +76,12 @@ def evaluate(
     from gttnet.evaluate.summary import write_summary
 
     out = Path(recipe.output_dir)
-    out.mkdir(parents=True, exist_ok=True)
     csv_path = out / "errors.csv"
     if csv_path.exists() and not resume:
         raise EvalRecipeError(f"{csv_path} exists; resume it or choose another output_dir")
+    jobs = plan_jobs(recipe)  # every recipe error (methods, data sources) surfaces before anything is written
+    out.mkdir(parents=True, exist_ok=True)
     (out / "recipe.json").write_text(json.dumps(dataclasses.asdict(recipe), indent=2) + "\n")
-    jobs = plan_jobs(recipe)
     expected = frozenset((s, m.name) for s in recipe.sequencing for m in recipe.methods)
     done = done_pairs(clean_csv(csv_path))
     pending = [(j, expected - done.get(j.job_id, set())) for j in jobs]

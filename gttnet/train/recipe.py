@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import yaml
 
-from gttdata.recipe import apply_overrides
-from gttnet._typed_yaml import build_dataclass
-from gttnet.errors import GttNetError
+from gttdata.errors import RecipeError
+from gttdata.recipe import apply_overrides, build_dataclass, load_recipe
 from gttnet.train.stages import Stage
 
 __all__ = [
@@ -27,11 +26,7 @@ __all__ = [
 ]
 
 
-class RecipeError(GttNetError):
-    """A training recipe is malformed (names the key, what was expected and what was found)."""
-
-
-@dataclass
+@dataclass(frozen=True)
 class ModelSpec:
     """Which network to build.
 
@@ -43,20 +38,21 @@ class ModelSpec:
     """
 
     builder: str = "gttnet_base"
-    settings: dict[str, typing.Any] = field(default_factory=dict)
-    init: str | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+    init: str | None = field(default=None, metadata={"path": True})
 
 
-@dataclass
+@dataclass(frozen=True)
 class SourceSpec:
     """One source of captures: a gttdata generate recipe, built on the fly or read from its shards.
 
     Args:
-        generate: The ``gttdata`` generate recipe describing the data.
+        generate: The ``gttdata`` generate recipe describing the data (relative to the recipe file).
         overrides: ``key=value`` overrides of that recipe.
         kind: ``"recipe"``: build every sample on the fly (deterministic per index, no disk);
             ``"shards"``: read shards under ``root``, generating them first when absent.
-        root: Shard directory for ``kind: shards`` (default: the generate recipe's ``output_dir``).
+        root: Shard directory for ``kind: shards`` (default: the generate recipe's ``output_dir``);
+            a data folder, so relative to the working directory like every output folder.
         manifest: For ``kind: shards``, the registered manifest the shards must match (e.g.
             ``manifests/default.json``): the recipe hash and every shard's size and SHA-256 are checked
             before training, so a run never trains on data other than the dataset it names.
@@ -64,11 +60,11 @@ class SourceSpec:
         max_val: Use at most this many of its validation samples (None: all).
     """
 
-    generate: str = "recipes/gttdata/tiny.yaml"
+    generate: str = field(default="recipes/gttdata/tiny.yaml", metadata={"path": True})
     overrides: list[str] = field(default_factory=list)
     kind: str = "recipe"
     root: str | None = None
-    manifest: str | None = None
+    manifest: str | None = field(default=None, metadata={"path": True})
     max_train: int | None = None
     max_val: int | None = 4
 
@@ -81,7 +77,7 @@ class SourceSpec:
             )
 
 
-@dataclass
+@dataclass(frozen=True)
 class DataSpec:
     """Where training sequences come from and how each is presented.
 
@@ -106,7 +102,7 @@ class DataSpec:
     cache: str = "disk"
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainSpec:
     """Loop settings shared by every stage.
 
@@ -137,7 +133,7 @@ class TrainSpec:
     threads: int | None = 1
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainRecipe:
     """A complete training recipe.
 
@@ -158,6 +154,11 @@ class TrainRecipe:
     model: ModelSpec = field(default_factory=ModelSpec)
     data: DataSpec = field(default_factory=DataSpec)
     train: TrainSpec = field(default_factory=TrainSpec)
+
+    @classmethod
+    def from_mapping(cls, data: dict, overrides: Sequence[str] = (), source: str = "") -> TrainRecipe:
+        """:func:`parse_train_recipe` (the hook :func:`gttdata.recipe.load_recipe` calls)."""
+        return parse_train_recipe(data, overrides, source)
 
     def __post_init__(self) -> None:
         if not self.stages:
@@ -189,38 +190,25 @@ class TrainRecipe:
             raise ValueError(f"train.dtype must be float32 or float64, got {self.train.dtype!r}")
 
 
-def parse_train_recipe(data: dict, overrides: Sequence[str] = ()) -> TrainRecipe:
+def parse_train_recipe(data: dict, overrides: Sequence[str] = (), source: str = "") -> TrainRecipe:
     """Build a :class:`TrainRecipe` from a plain mapping and ``key.sub=value`` overrides.
+
+    Args:
+        data: Plain recipe data (not modified).
+        overrides: ``key.sub=value`` strings (values parsed as YAML), applied in order.
+        source: The recipe file, first word of every message ("" for none).
 
     Raises:
         RecipeError: On an unknown key, a wrong type or an invalid value (one line naming the key).
     """
     data = yaml.safe_load(yaml.safe_dump(data)) or {}
-    apply_overrides(data, overrides, "train recipe", error=RecipeError)
-    return typing.cast(TrainRecipe, build_dataclass(TrainRecipe, data, error=RecipeError))
+    apply_overrides(data, overrides, source or "train recipe")
+    return build_dataclass(TrainRecipe, data, "", source)
 
 
 def load_train_recipe(path: str | Path, overrides: Sequence[str] = ()) -> TrainRecipe:
-    """Load a YAML training recipe.
-
-    Args:
-        path: Recipe file.
-        overrides: ``key.sub=value`` strings (values parsed as YAML), applied in order.
-
-    Raises:
-        RecipeError: If the file is not a mapping or does not validate.
-    """
-    p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise RecipeError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
-    if not isinstance(data, dict):
-        raise RecipeError(f"{p}: expected a mapping at the top level")
-    try:
-        return parse_train_recipe(data, overrides)
-    except RecipeError as exc:
-        raise RecipeError(f"{p}: {exc}") from exc
+    """``load_recipe(path, overrides, cls=TrainRecipe)`` (relative file paths resolve against its folder)."""
+    return load_recipe(path, overrides, cls=TrainRecipe)
 
 
 def recipe_to_dict(recipe: TrainRecipe) -> dict:

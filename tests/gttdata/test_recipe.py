@@ -185,3 +185,19 @@ def test_param_draws_respect_kind_and_range():
     assert set(Param("choice", (7.5, 15.0, 30.0)).draw(rng, size=300).tolist()) == {7.5, 15.0, 30.0}
     assert Param("list", (30.0, 15.0)).draw(rng, size=3).tolist() == [30.0, 15.0, 30.0]
     assert float(Param.of(2.5).draw(rng)) == 2.5
+
+
+def test_relative_paths_resolve_against_the_recipe_folder(tmp_path: Path, monkeypatch):
+    folder = tmp_path / "recipes"
+    folder.mkdir()
+    data = yaml.safe_load(Path("recipes/gttdata/tiny.yaml").read_text())
+    data["splits"][0]["sources"] = [
+        {"kind": "files", "paths": ["motions/a.bvh", "cache:01_01.bvh", "/abs/b.bvh"]}
+    ]
+    data["rig"] = {"kind": "file", "path": "rig.toml"}
+    (folder / "r.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.chdir(tmp_path)
+    r = load_recipe("recipes/r.yaml")
+    assert r.splits[0].sources[0].paths == (str(folder / "motions/a.bvh"), "cache:01_01.bvh", "/abs/b.bvh")
+    assert r.rig.path == str(folder / "rig.toml")
+    assert load_recipe("recipes/r.yaml", ["rig.path=here.toml"]).rig.path == "here.toml"  # typed in a shell

@@ -118,3 +118,18 @@ def test_reconstruct_two_subjects(tmp_path):
     assert summary["n_subjects"] == 2 and summary["clustering_accuracy"] >= 0.95
     assert len(summary["mpjpe_mm_per_subject"]) == 2
     assert (tmp_path / "r.h5").is_file()
+
+
+def test_evaluate_from_outside_the_repository(tmp_path, monkeypatch):
+    """Paths inside a recipe resolve against its folder; a recipe error leaves no run folder behind."""
+    from pathlib import Path
+
+    recipe = Path(__file__).resolve().parents[2] / "recipes" / "gttnet" / "eval_smoke.yaml"
+    monkeypatch.chdir(tmp_path)
+    common = [recipe, "data.n_sequences=1", "sequencing=[full]", "--quiet", "--no-plots"]
+    r = _run("evaluate", *common, "methods=[pseudo]", "--out", "ok")
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "ok" / "errors.csv").is_file()
+    r = _run("evaluate", *common, "methods=[nope]", "--out", "bad")
+    assert r.exit_code == 1 and "unknown method 'nope'" in r.output
+    assert not (tmp_path / "bad").exists()
