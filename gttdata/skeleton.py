@@ -12,7 +12,7 @@ from gttdata.errors import MotionFormatError
 
 __all__ = ["Skeleton", "cmu31", "CMU31_JOINTS", "CMU31_BVH_ALIASES", "default_skeleton", "load_skeleton"]
 
-#: CMU-31 joints in ASF order (shared/REFERENCE.md).
+#: CMU-31 joints in the bone order of the CMU ASF skeleton files (root first).
 CMU31_JOINTS: tuple[str, ...] = (
     "root", "lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes",
     "rhipjoint", "rfemur", "rtibia", "rfoot", "rtoes",

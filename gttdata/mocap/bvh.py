@@ -40,7 +40,7 @@ __all__ = ["CMU_BVH_SCALE_M", "BvhData", "forward_kinematics", "guess_scale_m", 
 
 _log = logging.getLogger(__name__)
 
-#: Metres per CMU length unit (1/0.45 inch), REFERENCE.md.
+#: Metres per CMU length unit: the CMU ASF files declare ``length 0.45``, so one unit is 1/0.45 inch.
 CMU_BVH_SCALE_M: float = 0.0254 / 0.45
 #: Candidate units of non-CMU files for the automatic scale, metres per unit.
 _AUTO_UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}

@@ -76,7 +76,7 @@ def neighbourhoods(
     """The K neighbours of each image (the image itself excluded), restricted by the sequencing condition.
 
     * ``none``: the K best-ranked images of other cameras with finite pseudo-triangulation cost.
-    * ``partial`` (paper Sec. 3.4, scenario 2): same-stream images are dropped, and from every other
+    * ``partial`` (paper Sec. 4.2, scenario 2): same-stream images are dropped, and from every other
       stream only images *adjacent among themselves* are kept. Rule used: best-first growth. Each
       other stream's best-ranked image seeds a run; repeatedly the best-ranked image among all runs'
       frontier images (the stream predecessor of a run's first image, the successor of its last, and
@@ -153,8 +153,8 @@ def chain_affinity(
 ) -> np.ndarray:
     """Within-stream chain: links each image to its predecessor and successor in its own stream.
 
-    Under partial sequencing this is the only timing known (REFERENCE.md: W_const, and the chain added
-    to GTT-Net's sparse affinity). Streams are cameras; adjacency follows the ``stream_index`` rank, so
+    Under partial sequencing this is the only timing known (docs/METHOD.md: the DLOE prior W_const, and the chain
+    added to GTT-Net's sparse affinity). Streams are cameras; adjacency follows the ``stream_index`` rank, so
     gaps in the index (dropped frames) still link.
 
     Args:

@@ -158,7 +158,7 @@ def pseudo_triangulate(
     min_angle_deg: float = 30.0,
     block_rows: int = 64,
 ) -> PseudoTriangulation:
-    """Exhaustive pairwise pseudo-triangulation of N images (REFERENCE.md, "Pseudo-triangulation").
+    """Exhaustive pairwise pseudo-triangulation of N images (docs/METHOD.md, section 2).
 
     For every pair (i, j) of images from different cameras and every joint p visible in both, the
     closest points ``c_ij = C_i + s r_i`` and ``c_ji = C_j + t r_j`` of the two rays give the error

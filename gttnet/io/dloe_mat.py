@@ -91,7 +91,7 @@ def _cameras(path: Path, cam_index: np.ndarray, n: int) -> tuple[np.ndarray, np.
 def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
     """Read a DLOE demo ``.mat`` file.
 
-    Layout (REFERENCE.md): a struct ``caminput`` with ``x`` (N x 1 cell of 3 x P homogeneous pixel
+    Layout (docs/FORMAT.md, "DLOE MATLAB layout"): a struct ``caminput`` with ``x`` (N x 1 cell of 3 x P homogeneous pixel
     coordinates, NaN for a missing joint), ``K`` (N x 1 cell of 3 x 3), ``R`` (N x 1 cell of
     world→camera rotations), ``t`` (N x 1 cell of 1 x 3 camera **centres**), ``cam_index`` (1 x V
     cumulative image counts; images grouped by camera and time-ordered inside each) and ``order`` (0, or

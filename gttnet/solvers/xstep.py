@@ -235,7 +235,7 @@ def solve_structure(
     x_prior: ArrayIn | None = None,
     prior_weight: float = 1e-6,
 ) -> torch.Tensor:
-    """Structure X minimising the DLOE objective for a given affinity (REFERENCE.md, "The DLOE X-step").
+    """Structure X minimising the DLOE objective for a given affinity (docs/METHOD.md, section 4).
 
     Per joint and coordinate c: ``|L_out x_c|^2 + lambda1 x_c^T L_sym x_c`` plus
     ``lambda2 sum_n |(I - r r^T)(X_n - C_n)|^2`` over observed images (all terms / (N J), which does
