@@ -26,8 +26,9 @@ def pointnet_bundle(tmp_path, monkeypatch):
     """An (untrained) PointNet model installed as the bundled cross-domain model."""
     path = inference.save_model(tmp_path / "gttnet_pointnet.pt", gttnet_pointnet(k=8, domains={"hand21": 21}))
     monkeypatch.setattr(inference, "BUNDLED_POINTNET_MODEL", path)
-    monkeypatch.setattr(inference, "_CACHE", {})
-    return path
+    inference.cached_reconstructor.cache_clear()  # models loaded by other tests are not this one
+    yield path
+    inference.cached_reconstructor.cache_clear()
 
 
 def test_bundled_choice_by_topology(pointnet_bundle):
