@@ -34,11 +34,11 @@ import gttnet.geometry.candidates as cand_mod  # noqa: E402
 from gttdata.capture.views import make_view  # noqa: E402
 from gttdata.generate_plan import build_sample  # noqa: E402
 from gttdata.recipe import load_recipe  # noqa: E402
-from gttnet.baselines import reconstruct  # noqa: E402
 from gttnet.evaluate.metrics import mpjpe_mm  # noqa: E402
 from gttnet.geometry.candidates import candidate_pseudo_triangulate  # noqa: E402
 from gttnet.geometry.neighbours import neighbourhoods  # noqa: E402
 from gttnet.geometry.triangulation import pseudo_triangulate  # noqa: E402
+from gttnet.methods import reconstruct  # noqa: E402
 
 K = 20
 

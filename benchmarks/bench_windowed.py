@@ -25,8 +25,8 @@ import torch  # noqa: E402
 from gttdata.capture.views import make_view  # noqa: E402
 from gttdata.generate_plan import build_sample  # noqa: E402
 from gttdata.recipe import load_recipe  # noqa: E402
-from gttnet.baselines import reconstruct  # noqa: E402
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm  # noqa: E402
+from gttnet.methods import reconstruct  # noqa: E402
 from gttnet.windowed import auto_window, reconstruct_windowed  # noqa: E402
 
 

@@ -247,8 +247,8 @@ def test_time_aware_difference_operator_is_exact_on_quadratics():
 
 
 def test_sync_method_matches_hpf_given_true_timestamps(capture):
-    from gttnet.baselines import reconstruct
     from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+    from gttnet.methods import reconstruct
 
     obs, gt = make_view(capture, "partial")
     rec = reconstruct(obs, "sync", fps={0: 25.0, 1: 30.0, 2: 60.0})
@@ -261,7 +261,7 @@ def test_sync_method_matches_hpf_given_true_timestamps(capture):
 
 
 def test_auto_picks_by_sequencing(capture):
-    from gttnet.baselines import reconstruct
+    from gttnet.methods import reconstruct
 
     for seq, ran in (("full", "hpf"), ("partial", "sync"), ("none", "dloe")):
         obs, _ = make_view(capture, seq)
@@ -295,8 +295,8 @@ def test_simulated_views_carry_each_cameras_own_clock():
 
 
 def test_evaluation_records_the_offset_error(capture):
+    from gttnet.evaluate.jobs import _offset_error_frames, run_method
     from gttnet.evaluate.recipe import MethodEntry
-    from gttnet.evaluate.run import _offset_error_frames, run_method
 
     obs, gt = make_view(capture, "partial")
     rec = run_method(obs, MethodEntry(method="sync", options={"fps": {0: 25.0, 1: 30.0, 2: 60.0}}))

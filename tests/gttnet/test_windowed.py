@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gttdata.capture.views import make_view
-from gttnet.baselines import reconstruct
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+from gttnet.methods import reconstruct
 from gttnet.windowed import (
     approximate_times,
     auto_window,
