@@ -1,5 +1,7 @@
-"""Dataset directories: DatasetReader (stored samples by global index, through the manifest) and CaptureDataset
-(a map-style, numpy-only dataset of sequencing views over a split).
+"""Dataset directories: stored samples by global index, and sequencing views over a split.
+
+DatasetReader reads samples through the manifest; CaptureDataset is a map-style, numpy-only dataset of
+sequencing views.
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +46,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: A method function: ``fn(obs, **options) -> Reconstruction``.
+MethodFn = Callable[..., "Reconstruction"]
 
 _LEVEL = {name: i for i, name in enumerate(SEQUENCING)}  # none < partial < full
 _NEEDS_TEXT = {"none": "nothing", "partial": "per-camera stream order", "full": "the global image order"}
@@ -70,7 +74,7 @@ class Reconstruction:
     seconds: float = 0.0
     method: str = ""
     sequencing: str = "none"
-    info: dict = field(default_factory=dict, compare=False)
+    info: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         X = np.asarray(self.points3d, dtype=np.float64)
@@ -124,7 +128,9 @@ _REGISTRY: dict[str, MethodSpec] = {}
 _LOADED = False
 
 
-def register_method(name: str, *, requires: str = "none", summary: str = "", needs: str = "") -> Callable:
+def register_method(
+    name: str, *, requires: str = "none", summary: str = "", needs: str = ""
+) -> Callable[[MethodFn], MethodFn]:
     """Decorator registering ``fn(obs: Observations, **options) -> Reconstruction`` under ``name``.
 
     Args:
@@ -140,7 +146,7 @@ def register_method(name: str, *, requires: str = "none", summary: str = "", nee
     if requires not in _LEVEL:
         raise ValueError(f"register_method({name!r}): requires must be one of {SEQUENCING}, got {requires!r}")
 
-    def deco(fn: Callable[..., Reconstruction]) -> Callable[..., Reconstruction]:
+    def deco(fn: MethodFn) -> MethodFn:
         if name in _REGISTRY and _REGISTRY[name].fn is not fn:
             log.warning("method %r re-registered by %s.%s", name, fn.__module__, fn.__qualname__)
         doc = summary or (inspect.getdoc(fn) or "").split("\n")[0]
@@ -197,7 +203,7 @@ def check_sequencing(obs: Observations, spec: MethodSpec) -> None:
         )
 
 
-def _check_options(spec: MethodSpec, options: dict) -> None:
+def _check_options(spec: MethodSpec, options: dict[str, Any]) -> None:
     params = inspect.signature(spec.fn).parameters
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
         return
@@ -209,7 +215,7 @@ def _check_options(spec: MethodSpec, options: dict) -> None:
         )
 
 
-def reconstruct(obs: Observations, method: str, **options) -> Reconstruction:
+def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstruction:
     """Reconstruct 3D joints from observations with a registered method.
 
     Ground truth never reaches a method: this takes only the :class:`Observations`.

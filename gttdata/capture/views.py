@@ -248,7 +248,9 @@ def _stream_times(capture: ViewableCapture, perm: np.ndarray) -> np.ndarray | No
     estimates).
     """
     meta = getattr(capture, "meta", None)
-    fps = meta.get("capture", {}).get("fps_hz") if isinstance(meta, dict) else None
+    if not isinstance(meta, dict):
+        return None
+    fps = meta.get("capture", {}).get("fps_hz")
     if not fps or len(fps) <= int(capture.cam_id.max(initial=0)):
         return None
     frame = np.asarray(meta.get("frame_number", capture.stream_index), dtype=np.float64)
@@ -289,17 +291,18 @@ def make_view(
         visible=capture.visible[perm].copy(),
         image_size=np.asarray(capture.image_size).copy(),
         stream_index=None if sequencing == "none" else capture.stream_index[perm].copy(),
-        timestamp_s=times[perm].astype(np.float64) if sequencing == "full" else None,
+        timestamp_s=times[perm].astype(np.float64) if sequencing == "full" and times is not None else None,
         stream_time_s=None if sequencing == "none" else _stream_times(capture, perm),
     )
-    if capture.points3d is None:
+    X = capture.points3d
+    if X is None:
         return obs, None  # type: ignore[return-value]
     inv = np.empty_like(perm)
     inv[perm] = np.arange(perm.shape[0])
     nbr = capture.affinity_nbr[perm]
     nbr = np.where(nbr >= 0, inv[np.maximum(nbr, 0)], -1).astype(np.int32)
     gt = GroundTruth(
-        points3d=capture.points3d[perm].copy(),
+        points3d=X[perm].copy(),
         timestamp_s=np.full(perm.shape[0], np.nan) if times is None else times[perm].astype(np.float64),
         global_order=capture.global_order[perm].copy(),
         affinity_nbr=nbr,

@@ -6,7 +6,7 @@ import hashlib
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar, overload
 
 from gttdata.errors import RecipeError
 from gttdata.recipe._parse import (
@@ -200,7 +200,11 @@ def parse_recipe(data: dict | None, *, source: str = "<recipe>") -> GenerateReci
     return recipe
 
 
-def load_recipe(path: str | Path, overrides: Sequence[str] = (), *, cls: type[R] = GenerateRecipe) -> R:  # type: ignore[assignment]
+@overload
+def load_recipe(path: str | Path, overrides: Sequence[str] = ...) -> GenerateRecipe: ...
+@overload
+def load_recipe(path: str | Path, overrides: Sequence[str] = ..., *, cls: type[R]) -> R: ...
+def load_recipe(path: str | Path, overrides: Sequence[str] = (), *, cls: type[Any] = GenerateRecipe) -> Any:
     """Read a YAML recipe of any kind, apply ``key.sub=value`` overrides, and validate it before any work.
 
     The one loader of gtt recipes: ``gttdata generate`` recipes (the default), training recipes

@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -40,13 +42,15 @@ class MethodChoice(click.Choice):
         super().__init__((), case_sensitive=True)
 
     @property
-    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+    def choices(self) -> Sequence[Any]:
         from gttnet.methods import available_methods
 
         return tuple(available_methods())
 
     @choices.setter
-    def choices(self, value) -> None:  # click.Choice.__init__ assigns it; the registry is the source
+    def choices(
+        self, value: Sequence[Any]
+    ) -> None:  # click.Choice.__init__ assigns it; the registry is the source
         pass
 
 

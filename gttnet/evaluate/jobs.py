@@ -69,7 +69,9 @@ def plan_jobs(recipe: EvalRecipe) -> list[Job]:
             pass  # a missing model is a per-job skip with a note, not a recipe error
         except ValueError as exc:
             raise EvalRecipeError(f"methods.{m.name}: {exc}") from exc
-    conds = [("base", "", 0.0, (), recipe.data.dataset)]
+    conds: list[tuple[str, str, float, tuple[str, ...], str | None]] = [
+        ("base", "", 0.0, (), recipe.data.dataset)
+    ]
     if recipe.sweeps:
         conds = [
             (s.name, s.variable, v.value * s.scale, (f"{s.variable}={v.value}", *v.overrides), v.dataset)
