@@ -216,7 +216,7 @@ def symmetrise(A: np.ndarray) -> np.ndarray:
     A = np.asarray(A, dtype=np.float64)
     if A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"affinity must have shape (N, N), got {A.shape}")
-    S = 0.5 * (np.abs(A) + np.abs(A).T)
+    S = np.asarray(0.5 * (np.abs(A) + np.abs(A).T), dtype=np.float64)
     np.fill_diagonal(S, 0.0)
     return S
 
@@ -225,7 +225,7 @@ def normalised_laplacian(S: np.ndarray) -> np.ndarray:
     """``I - D^-1/2 S D^-1/2`` of a symmetric affinity ``S`` (isolated images get a zero row), ``(N, N)``."""
     d = S.sum(axis=1)
     inv = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 0.0)
-    return np.eye(S.shape[0]) - inv[:, None] * S * inv[None, :]
+    return np.asarray(np.eye(S.shape[0]) - inv[:, None] * S * inv[None, :], dtype=np.float64)
 
 
 def spectral_embedding(A: np.ndarray, k: int) -> np.ndarray:
@@ -241,4 +241,4 @@ def spectral_embedding(A: np.ndarray, k: int) -> np.ndarray:
     S = symmetrise(A)
     k = max(1, min(k, S.shape[0]))
     _, vec = scipy.linalg.eigh(normalised_laplacian(S), subset_by_index=[0, k - 1])
-    return vec
+    return np.asarray(vec, dtype=np.float64)
