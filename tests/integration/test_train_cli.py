@@ -51,7 +51,7 @@ def test_train_stop_and_resume(tmp_path, in_repo):
     ("args", "message"),
     [
         (["train", TINY, "trian.steps=1"], "trian: unknown key"),
-        (["train", TINY, "stages.0.steps=zero"], "stages.0.steps: expected int"),
+        (["train", TINY, "stages.0.steps=zero"], "stages.0.steps: expected an integer"),
         (["train", TINY, "model.builder=gttnet_huge"], "unknown model builder"),
         (["train", "--resume", "/nonexistent/run"], "no checkpoint to resume from"),
         (["train"], "give a RECIPE"),
