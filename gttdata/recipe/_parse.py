@@ -21,6 +21,7 @@ import yaml
 
 from gttdata.errors import RecipeError
 from gttdata.recipe.param import Param
+from gttdata.recipe.yamlio import load_yaml
 
 __all__ = [
     "Shorthand",
@@ -274,7 +275,7 @@ def read_yaml_mapping(path: str | Path, *, error: type[RecipeError] = RecipeErro
     except IsADirectoryError as exc:
         raise error(f"{source}: expected a recipe file, found a directory") from exc
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}: " if mark is not None else ""
@@ -385,7 +386,7 @@ def apply_overrides(
         if not sep or not key.strip():
             raise error(f"{source}: override {ov!r}: expected key.sub=value")
         try:
-            value = yaml.safe_load(text)
+            value = load_yaml(text)
         except yaml.YAMLError as exc:
             raise error(f"{source}: override {key}: value {text!r} is not valid YAML ({exc})") from exc
         node: object = data

@@ -61,6 +61,7 @@ def plan_jobs(recipe: EvalRecipe) -> list[Job]:
 
     Raises:
         EvalRecipeError: For an unknown method name (checked before any work).
+        RecipeError: A condition's data recipe is missing or invalid (also checked before any work).
     """
     for m in recipe.methods:
         try:
@@ -81,6 +82,8 @@ def plan_jobs(recipe: EvalRecipe) -> list[Job]:
     base = tuple(recipe.data.overrides)
     jobs = []
     for name, var, value, ovr, ds in conds:
+        if ds is None:  # load each condition's data recipe now: a bad path or value fails before any write
+            _generate_recipe(recipe.data.generate, base + tuple(ovr))
         for i in range(_n_sequences(recipe, ds)):
             jobs.append(Job(f"{name}:{value:g}:{i:04d}", name, var, float(value), base + tuple(ovr), ds, i))
     return jobs
