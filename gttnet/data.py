@@ -7,6 +7,7 @@ import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -175,6 +176,14 @@ class ShardSource:
         return {**self.__dict__, "_sets": {}}
 
 
+class ViewSource(Protocol):
+    """What :class:`ConcatSource` needs of a source: the view of one of its samples."""
+
+    def view(self, index: int, sequencing: str, variant: str) -> tuple[Observations, GroundTruth]:
+        """The view of local sample ``index`` under ``sequencing`` for ``variant``."""
+        ...
+
+
 class ConcatSource:
     """Several sources seen as one, index after index.
 
@@ -182,7 +191,7 @@ class ConcatSource:
         sources: ``(source, count)`` pairs; the first ``count`` samples of each are used.
     """
 
-    def __init__(self, sources: Sequence[tuple[object, int]]) -> None:
+    def __init__(self, sources: Sequence[tuple[ViewSource, int]]) -> None:
         self.parts = [(src, int(n)) for src, n in sources if n > 0]
         self._starts = np.cumsum([0] + [n for _, n in self.parts])
 

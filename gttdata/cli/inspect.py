@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -122,7 +122,7 @@ def _dataset_lines(root: Path) -> tuple[list[str], dict]:
                 found.append({"path": str(p.relative_to(root)), "samples": len(r), "first_index": first})
         for p in tmps:
             lines.append(f"  {p.relative_to(root)}: temporary file of an unfinished or killed run")
-        data = {
+        data: dict[str, Any] = {
             "path": str(root),
             "complete": False,
             "shards": found,

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gttdata.capture.sample import CaptureSample
 from gttdata.capture.views import GroundTruth, Observations, make_view, view_permutation
 from gttnet.errors import ImportFormatError
 from gttnet.io._views import UNITS, ImportedCapture
@@ -119,6 +120,7 @@ def load_input(
     units = _DEFAULT_UNITS[fmt] if units is None else units
     if units not in UNITS:
         raise ValueError(f"unknown units {units!r}; expected one of {', '.join(UNITS)}")
+    cap: CaptureSample | ImportedCapture
     if fmt == "h5":
         if units != "m":
             raise ValueError(f"{path}: shards are stored in metres; --units {units} does not apply")

@@ -9,8 +9,10 @@ import os
 import random
 import shutil
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -61,7 +63,10 @@ class RunResult:
 
 
 def _stage_length(stage: Stage, steps_per_epoch: int) -> int:
-    return stage.steps if stage.steps is not None else stage.epochs * steps_per_epoch
+    if stage.steps is not None:
+        return stage.steps
+    assert stage.epochs is not None  # a stage has exactly one of steps / epochs (checked when parsed)
+    return stage.epochs * steps_per_epoch
 
 
 def _lr(stage: Stage, state: LoopState, total: int) -> float:
@@ -88,7 +93,7 @@ class _Context:
     rank: int
     world: int
     logger: RunLog
-    batches: object
+    batches: Iterator[list[TrainItem]]
     val_items: list[TrainItem]
     steps_per_epoch: int
 
@@ -131,7 +136,12 @@ def _prepare(
     log.info("run %s on %s (world %d): %d parameters", run_dir, dev, world, n_params)
 
     spec = recipe.data
-    common = {"k": model.config.k, "sequencing": spec.sequencing, "seed": recipe.seed, "cache": spec.cache}
+    common: dict[str, Any] = {
+        "k": model.config.k,
+        "sequencing": spec.sequencing,
+        "seed": recipe.seed,
+        "cache": spec.cache,
+    }
     cache = run_dir / "item_cache"
     train_set = SequenceDataset(
         open_source(spec, spec.train_split), variants=spec.variants, cache_dir=cache / "train", **common
@@ -218,7 +228,7 @@ def _finish(ctx: _Context, state: LoopState) -> None:
     distributed.check_replicas(ctx.model, ctx.world)
     if ctx.rank != 0:
         return
-    last_val = next((r for r in reversed(state.history) if r["kind"] == "val"), {})
+    last_val: dict = next((r for r in reversed(state.history) if r["kind"] == "val"), {})
     card = {"recipe": recipe_to_dict(ctx.recipe), "git_sha": git_sha(), "steps": state.global_step,
             "validation": last_val, "trained_on": str(ctx.dev), "world": ctx.world}  # fmt: skip
     save_model(ctx.run_dir / "model.pt", ctx.model, card=card)
@@ -264,7 +274,9 @@ def train(
         recipe, out = parse_train_recipe(payload["recipe"]), resume
     else:
         ck = Path(out) / CHECKPOINT_NAME if out is not None and resume else None
-        payload = load_checkpoint(out) if ck is not None and ck.is_file() else None
+        payload = load_checkpoint(ck.parent) if ck is not None and ck.is_file() else None
+    if recipe is None:
+        raise ValueError("train() needs a recipe or a run directory to resume")
     with OutputLock(out, "gttnet train") if rank0 and out is not None else contextlib.nullcontext():
         return _train(recipe, payload, out, device, max_steps, progress)
 
