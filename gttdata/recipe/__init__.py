@@ -225,14 +225,15 @@ def load_recipe(path: str | Path, overrides: Sequence[str] = (), *, cls: type[An
         RecipeError: e.g. ``recipe.yaml: capture.sigma_px: expected a number >= 0 or a distribution, found 'abc'``.
     """
     error = getattr(cls, "recipe_error", RecipeError)
-    data = read_yaml_mapping(path, error=error)
-    data = resolve_paths(cls, data, Path(path).resolve().parent)
-    return cls.from_mapping(data, overrides, str(path))  # type: ignore[attr-defined]
+    data = resolve_paths(cls, read_yaml_mapping(path, error=error), Path(path).resolve().parent)
+    return cls.from_mapping(data, overrides, str(path))
 
 
 def recipe_to_dict(recipe: GenerateRecipe) -> dict:
     """The full recipe (defaults included) as plain data; ``parse_recipe`` of it gives back an equal recipe."""
-    return to_plain(recipe)
+    plain = to_plain(recipe)
+    assert isinstance(plain, dict)  # a dataclass becomes a mapping
+    return plain
 
 
 def recipe_hash(recipe: GenerateRecipe) -> str:

@@ -16,6 +16,7 @@ import types
 import typing
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, cast
 
 import yaml
 
@@ -81,17 +82,18 @@ class _Ctx:
 
 
 def _check_number(ctx: _Ctx, key: str, v: object, meta: dict, expected: str) -> float:
-    if not _is_number(v) or not _in_range(v, meta):
+    if not _is_number(v):
         raise ctx.fail(key, expected, v)
-    if meta.get("integer") and float(v) != int(v):
+    x = cast(float, v)  # an int or a float, not a bool
+    if not _in_range(x, meta) or (meta.get("integer") and float(x) != int(x)):
         raise ctx.fail(key, expected, v)
-    return int(v) if meta.get("integer") else float(v)
+    return int(x) if meta.get("integer") else float(x)
 
 
 def _convert_param(ctx: _Ctx, key: str, v: object, meta: dict) -> Param:
     num = _number_text(meta)
     expected = f"{num} or a distribution" + (" or a list of them" if meta.get("allow_list") else "")
-    kw = {
+    kw: dict[str, Any] = {
         "integer": bool(meta.get("integer")),
         "lo": meta.get("ge", meta.get("gt")),
         "hi": meta.get("le", meta.get("lt")),
@@ -195,7 +197,7 @@ def _convert(ctx: _Ctx, key: str, tp: object, v: object, meta: dict) -> object:
         v = ctx.shorthand(tp, v)
     if tp is Param:
         return _convert_param(ctx, key, v, meta)
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return build_dataclass(tp, v, key, ctx)
     if origin is list:
         if not isinstance(v, list):
@@ -209,7 +211,7 @@ def _convert(ctx: _Ctx, key: str, tp: object, v: object, meta: dict) -> object:
         return {k: _convert(ctx, f"{key}.{k}", args[1], x, {}) for k, x in v.items()}
     if origin is tuple:
         return _convert_tuple(ctx, key, args, v, meta)
-    return _convert_scalar(ctx, key, tp, v, meta)
+    return _convert_scalar(ctx, key, cast(type, tp), v, meta)
 
 
 def build_dataclass(
@@ -332,7 +334,7 @@ def resolve_paths(cls: type, data: object, base: str | Path) -> object:
 def _resolve_nested(tp: object, v: object, base: Path) -> object:
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
-        members = [a for a in args if dataclasses.is_dataclass(a)]
+        members = [a for a in args if isinstance(a, type) and dataclasses.is_dataclass(a)]
         if isinstance(v, dict) and members:
             kinds = {
                 m.__dataclass_fields__["kind"].default: m for m in members if "kind" in m.__dataclass_fields__
@@ -341,7 +343,7 @@ def _resolve_nested(tp: object, v: object, base: Path) -> object:
             return resolve_paths(chosen, v, base)
         others = [a for a in args if a is not type(None)]
         return _resolve_nested(others[0], v, base) if len(others) == 1 else v
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return resolve_paths(tp, v, base)
     if origin in (list, tuple) and isinstance(v, list) and args:
         return [_resolve_nested(args[0], x, base) for x in v]
