@@ -17,5 +17,5 @@ for method in pseudo dloe gttnet; do
     --out "$RUN/test0_${method}.h5" --json | tee "$RUN/test0_${method}.json"
 done
 
-gttnet evaluate recipes/gttnet/eval_smoke.yaml --out "$RUN/eval_smoke"
+gttnet evaluate recipes/gttnet/eval_smoke.yaml --out "$RUN/eval_smoke" --resume
 echo "demo finished: dataset in $DATA, reconstructions and evaluation in $RUN"

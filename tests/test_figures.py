@@ -83,3 +83,42 @@ def test_preview_figure_matches_its_command(remade, src, dst):
         except (_gl.RendererUnavailableError, _gl.PreviewDependencyError) as exc:
             pytest.skip(f"no offscreen GL: {exc}")
     assert_images_match(made, ROOT / dst)
+
+
+#: The evaluation table behind the sweep figures: the rows of ``gttnet evaluate recipes/gttnet/eval_paper.yaml``'s
+#: errors.csv for each committed sweep (see docs/figures/README.md).
+SWEEP_TABLE = FIGURES / "sweep_errors.csv"
+
+
+def _sweep_rows() -> list[dict]:
+    from gttnet.evaluate.run import read_rows
+
+    return read_rows(SWEEP_TABLE) if SWEEP_TABLE.exists() else []
+
+
+def _sweeps_in_table() -> list[str]:
+    import csv
+
+    if not SWEEP_TABLE.exists():
+        return []
+    with SWEEP_TABLE.open() as f:
+        return sorted({r["condition"] for r in csv.DictReader(f)})
+
+
+@pytest.mark.parametrize("condition", _sweeps_in_table())
+def test_sweep_figure_matches_its_table(condition, tmp_path):
+    """The committed sweep figure is plot_sweeps of the committed table, with no bar below zero error."""
+    pytest.importorskip("matplotlib")
+    from gttnet.evaluate.plots import plot_sweeps
+    from gttnet.evaluate.recipe import load_eval_recipe
+    from gttnet.evaluate.summary import mean_interval
+
+    rows = [r for r in _sweep_rows() if r["condition"] == condition]
+    recipe = load_eval_recipe(ROOT / "recipes/gttnet/eval_paper.yaml", [])
+    (made,) = plot_sweeps(rows, recipe, tmp_path)
+    assert_images_match(made, FIGURES / f"sweep_{condition}.png")
+    cells: dict[tuple, list[float]] = {}
+    for r in rows:
+        if r["status"] == "ok" and r["mpjpe_mm"]:
+            cells.setdefault((r["value"], r["sequencing"], r["method"]), []).append(float(r["mpjpe_mm"]))
+    assert cells and all(mean_interval(np.array(v), recipe.error_bars)[0] >= 0 for v in cells.values())

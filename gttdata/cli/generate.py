@@ -76,6 +76,7 @@ def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> 
     "--preview", type=click.IntRange(min=0), default=0, metavar="N", help="Render N samples afterwards."
 )
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the summary table (implies --no-progress).")
 @click.option(
     "--json",
     "as_json",
@@ -94,6 +95,7 @@ def generate_cmd(
     register_: bool,
     preview: int,
     progress: bool,
+    quiet: bool,
     as_json: bool,
 ) -> None:
     """Simulate the captures of RECIPE into HDF5 shards, then write and verify manifest.json.
@@ -112,13 +114,15 @@ def generate_cmd(
     from gttdata.recipe import load_recipe
 
     echo = (lambda *a, **k: None) if as_json else click.echo
+    info = (lambda *a, **k: None) if (as_json or quiet) else click.echo
+    progress = progress and not quiet
     recipe = load_recipe(recipe_path, overrides)
     if out is not None:
         recipe = dataclasses.replace(recipe, output_dir=str(out))
     blocks = plan_blocks(recipe)
     chosen = parse_shard_range(shard_range, len(blocks))
     n = sum(blocks[i].n_samples for i in chosen)
-    echo(
+    info(
         f"{recipe.name}: {n} samples in {len(chosen)} of {len(blocks)} shards -> {recipe.output_dir} "
         f"({workers} worker{'s' if workers > 1 else ''}{', resume' if resume else ''})"
     )

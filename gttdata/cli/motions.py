@@ -53,12 +53,23 @@ def summarise_motion(motion: Motion) -> list[str]:
 
 @click.group("motions")
 def motions() -> None:
-    """Fetch, list and inspect mocap files (cache: $GTT_CACHE or ~/.cache/gtt/motions)."""
+    """Fetch, list and inspect mocap files (cache: $GTT_CACHE or ~/.cache/gtt/motions).
+
+    \b
+    Examples:
+      gttdata motions fetch
+      gttdata motions show 01_01.bvh
+    """
 
 
 @motions.command("fetch")
 @click.option(
-    "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
+    "--out",
+    "--dest",
+    "dest",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Cache directory to fill [default: $GTT_CACHE or ~/.cache/gtt/motions].",
 )
 @click.option("--force", is_flag=True, help="Fetch every file again, even when a verified copy is cached.")
 @friendly_errors
@@ -66,6 +77,11 @@ def fetch_cmd(dest: Path | None, force: bool) -> None:
     """Copy the CMU BVH clips and Vicon C3D trials from Debian packages into the cache.
 
     Every file is checked against its known SHA-256; a damaged cached copy is fetched again.
+
+    \b
+    Examples:
+      gttdata motions fetch
+      gttdata motions fetch --out /tmp/motions
     """
     from gttdata.mocap.fetch import fetch_motions
 
@@ -75,10 +91,21 @@ def fetch_cmd(dest: Path | None, force: bool) -> None:
 
 @motions.command("list")
 @click.option(
-    "--dest", type=click.Path(file_okay=False, path_type=Path), default=None, help="Cache directory."
+    "--cache",
+    "--dest",
+    "dest",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Cache directory to list [default: $GTT_CACHE or ~/.cache/gtt/motions].",
 )
 def list_cmd(dest: Path | None) -> None:
-    """List the cached motion files with their frames, frame rate and joints."""
+    """List the cached motion files with their frames, frame rate and joints.
+
+    \b
+    Examples:
+      gttdata motions list
+      gttdata motions list --cache /tmp/motions
+    """
     from gttdata.mocap import load_motion
     from gttdata.mocap.fetch import cache_dir, list_cached
 
@@ -110,7 +137,13 @@ def list_cmd(dest: Path | None) -> None:
 @click.option("--scale", type=float, default=None, help="BVH only: metres per file unit.")
 @friendly_errors
 def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
-    """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height."""
+    """Summarise FILE (a path, or a name in the cache): frames, fps, joints, duration, extent, height.
+
+    \b
+    Examples:
+      gttdata motions show 01_01.bvh
+      gttdata motions show ~/.cache/gtt/motions/01_01.bvh
+    """
     from gttdata.mocap import format_for_path, load_motion
     from gttdata.mocap.fetch import cache_dir
 

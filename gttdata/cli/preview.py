@@ -32,7 +32,12 @@ def _check_3d() -> bool:
 @click.option(
     "--sample", "-s", "samples", type=int, multiple=True, help="Sample index (repeatable). [default: 0]"
 )
-@click.option("--split", default=None, help="Split of a dataset directory (default: all, in manifest order).")
+@click.option(
+    "--split",
+    default="test",
+    show_default=True,
+    help="Split of a dataset directory DIR, also the one its dataset plots cover (a SHARD holds one split).",
+)
 @click.option("--variant", default="orig", show_default=True, help="Input variant to show.")
 @click.option(
     "--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory."
@@ -55,6 +60,7 @@ def _check_3d() -> bool:
     help="Images (columns, first in time) per contact sheet.",
 )
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors (implies --no-progress).")
 @friendly_errors
 def preview_cmd(
     source: Path,
@@ -68,6 +74,7 @@ def preview_cmd(
     max_samples: int,
     sheet_images: int,
     progress: bool,
+    quiet: bool,
 ) -> None:
     """Write previews of samples of a dataset directory DIR (through its manifest) or of one SHARD file.
 
@@ -75,13 +82,17 @@ def preview_cmd(
     orbit camera, a timestamp raster and (--video) an MP4. For the whole source: timestamp raster,
     noise-sigma and missing-rate histograms, sequence lengths and motion sources.
 
-    Example: gttdata preview data/gttdata/tiny --split train --sample 0 --sample 2 --video
+    \b
+    Examples:
+      gttdata preview data/gttdata/default --sample 0 --video
+      gttdata preview data/gttdata/default --split train --sample 0 --sample 2 --no-3d --out runs/preview
     """
+    progress = progress and not quiet
     from gttdata.preview._gl import PreviewDependencyError
     from gttdata.preview.plots import open_source, plot_dataset
     from gttdata.preview.render import render_samples
 
-    reader = open_source(source, split)
+    reader = open_source(source, split if source.is_dir() else None)
     out = _default_out(source) if out is None else out
     indices = samples or (0,)
     try:
@@ -105,8 +116,9 @@ def preview_cmd(
             )
         except PreviewDependencyError as exc:
             click.echo(f"plots skipped: {exc}", err=True)
-    for path in written:
-        click.echo(str(path))
+    if not quiet:
+        for path in written:
+            click.echo(str(path))
 
 
 def register(main: click.Group) -> None:

@@ -26,6 +26,11 @@ def verify_cmd(root: Path, deep: bool) -> None:
     """Check every shard of ROOT against manifest.json: presence, size, SHA-256, schema version.
 
     Exits with status 1 and one line per bad shard when anything differs.
+
+    \b
+    Examples:
+      gttdata verify data/gttdata/default
+      gttdata verify data/gttdata/default --deep
     """
     from gttdata.manifest import load_manifest, verify_manifest
 
@@ -47,7 +52,14 @@ def verify_cmd(root: Path, deep: bool) -> None:
 )
 @friendly_errors
 def manifest_cmd(root: Path, register_: bool) -> None:
-    """Build ROOT/manifest.json from complete shards (e.g. after array jobs ran with --shard-range)."""
+    """Build ROOT/manifest.json from complete shards (e.g. after array jobs ran with --shard-range).
+
+    \b
+    Examples:
+      gttdata generate recipes/gttdata/tiny.yaml --shard-range 0:2 --out /tmp/tiny_jobs
+      gttdata generate recipes/gttdata/tiny.yaml --shard-range 2:3 --out /tmp/tiny_jobs
+      gttdata manifest /tmp/tiny_jobs
+    """
     from gttdata.manifest import build_manifest, register_manifest, verify_manifest, write_manifest
 
     manifest = build_manifest(root)

@@ -13,42 +13,91 @@ __all__ = ["register", "evaluate_cmd"]
 log = logging.getLogger(__name__)
 
 
+#: Files an evaluation writes into its run folder (what --overwrite removes).
+_RUN_FILES = ("errors.csv", "summary.md", "recipe.json")
+
+
+def _prepare_run_dir(output_dir: str, resume: bool, overwrite: bool) -> None:
+    """Apply docs/CLI.md's rule to an existing run folder: refuse, keep (--resume) or clear (--overwrite)."""
+    import shutil
+    from pathlib import Path
+
+    out = Path(output_dir)
+    if not (out / "errors.csv").exists():
+        return
+    if resume:
+        return
+    if not overwrite:
+        raise click.ClickException(
+            f"{out}: holds an evaluation (errors.csv); pass --resume to continue it or --overwrite to replace it"
+        )
+    for name in _RUN_FILES:
+        (out / name).unlink(missing_ok=True)
+    for png in out.glob("sweep_*.png"):
+        png.unlink()
+    shutil.rmtree(out / "runtime", ignore_errors=True)
+
+
 @click.command("evaluate")
 @click.argument("recipe_path", metavar="RECIPE", type=click.Path(dir_okay=False))
-@click.argument("overrides", nargs=-1)
+@click.argument("overrides", nargs=-1, metavar="[KEY=VALUE]...")
 @click.option(
-    "--workers", type=click.IntRange(min=1), default=None, help="Worker processes [default: recipe's]."
+    "--workers",
+    "-j",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Worker processes [default: the recipe's].",
 )
-@click.option("--out", "output_dir", type=click.Path(file_okay=False), default=None, help="Run directory.")
-@click.option("--no-resume", is_flag=True, help="Refuse to continue an existing errors.csv.")
+@click.option(
+    "--out",
+    "output_dir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Run folder (overrides output_dir).",
+)
+@click.option(
+    "--resume",
+    is_flag=True,
+    help="Continue the evaluation in the run folder: keep its finished rows, run the rest (also runs "
+    "methods added to the recipe since).",
+)
+@click.option("--overwrite", is_flag=True, help="Replace the evaluation already in the run folder.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--runtime", "runtime_only", is_flag=True, help="Run only the recipe's runtime study.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the summary (implies --no-progress).")
 @friendly_errors
-def evaluate_cmd(recipe_path, overrides, workers, output_dir, no_resume, no_plots, runtime_only, quiet):
+def evaluate_cmd(
+    recipe_path, overrides, workers, output_dir, resume, overwrite, no_plots, runtime_only, progress, quiet
+):
     """Evaluate methods on RECIPE's test sequences; OVERRIDES are key.sub=value.
 
     Writes errors.csv (one row per sample, sequencing and method; skipped methods carry a note),
-    summary.md and sweep_<condition>.png into the recipe's output_dir. A rerun resumes: finished jobs
-    are kept, the others run.
+    summary.md and sweep_<condition>.png into the recipe's output_dir (or --out). An existing evaluation
+    there is continued with --resume, replaced with --overwrite, and otherwise refused.
 
     \b
-    Example:
-      gttnet evaluate recipes/gttnet/eval_smoke.yaml data.n_sequences=1 --workers 2
+    Examples:
+      gttnet evaluate recipes/gttnet/eval_smoke.yaml --out runs/eval_smoke
+      gttnet evaluate recipes/gttnet/eval_smoke.yaml data.n_sequences=1 --workers 2 --out runs/eval_one --resume
     """
     from gttnet.evaluate.recipe import RuntimeSpec, load_eval_recipe
     from gttnet.evaluate.run import evaluate
     from gttnet.evaluate.runtime import run_runtime
 
+    if resume and overwrite:
+        raise click.UsageError("--resume and --overwrite exclude each other")
+    progress = progress and not quiet
     ovr = list(overrides) + ([f"output_dir={output_dir}"] if output_dir else [])
     recipe = load_eval_recipe(recipe_path, ovr)
     if runtime_only:
         out = f"{recipe.output_dir}/runtime"
-        res = run_runtime(recipe.runtime or RuntimeSpec(), out, progress=not quiet)
+        res = run_runtime(recipe.runtime or RuntimeSpec(), out, progress=progress)
         click.echo(res.markdown)
         click.echo(f"runtime study -> {out}")
         return
-    run_dir = evaluate(recipe, workers=workers, resume=not no_resume, progress=not quiet, plots=not no_plots)
+    _prepare_run_dir(recipe.output_dir, resume, overwrite)
+    run_dir = evaluate(recipe, workers=workers, resume=True, progress=progress, plots=not no_plots)
     click.echo((run_dir / "summary.md").read_text())
     click.echo(f"evaluation -> {run_dir}")
 

@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from gttdata.errors import RigError, friendly_errors
+from gttnet.cli._options import SPLIT_DEFAULT
 
 __all__ = ["register", "reconstruct_cmd"]
 
@@ -210,6 +211,7 @@ def _resolve_input(
     sequencing,
     units,
     seed,
+    split=None,
 ) -> dict:
     """The run's input: a recording (calibration + keypoints, or a project file) or one INPUT file."""
     is_project = (
@@ -249,19 +251,26 @@ def _resolve_input(
         }
     if len(input_paths) != 1:
         raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
+    import warnings
+
     from gttnet.io import load_input
     from gttnet.io.recording_input import view_of_loaded
 
     try:
-        loaded = load_input(
-            input_paths[0],
-            fmt=fmt,
-            sequencing=sequencing,
-            sample=sample,
-            variant=variant,
-            units=units,
-            seed=seed,
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            loaded = load_input(
+                input_paths[0],
+                fmt=fmt,
+                sequencing=sequencing,
+                sample=sample,
+                variant=variant,
+                units=units,
+                seed=seed,
+                split=split if Path(input_paths[0]).is_dir() else None,
+            )
+        for w in caught:
+            click.echo(f"warning: {w.message}", err=True)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     except RigError as exc:  # bad cameras in the file: name it
@@ -342,7 +351,13 @@ def _resolve_input(
     type=click.IntRange(min=0),
     default=0,
     show_default=True,
-    help="Sample index in a shard file (or over a dataset directory's splits).",
+    help="Sample index in a shard file, or in --split of a dataset directory.",
+)
+@click.option(
+    "--split",
+    default=SPLIT_DEFAULT,
+    show_default=True,
+    help="Split of a dataset directory INPUT (a shard file holds one split).",
 )
 @click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
 @click.option(
@@ -362,7 +377,8 @@ def _resolve_input(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
     default=None,
-    help="Length unit of a .mat/.json input, converted to metres [default: inch for those, m for shards].",
+    help="Length unit of a .mat/.json input, converted to metres; those files record none, so without "
+    "--units inch is assumed with a warning (shards are metres).",
 )
 @click.option(
     "--out",
@@ -405,6 +421,7 @@ def _resolve_input(
 @click.option(
     "--progress/--no-progress", default=True, show_default=True, help="Window progress bar on stderr."
 )
+@click.option("--quiet", "-q", is_flag=True, help="Print only the result (implies --no-progress).")
 @friendly_errors
 def reconstruct_cmd(
     input_paths,
@@ -418,6 +435,7 @@ def reconstruct_cmd(
     weights,
     fmt,
     sample,
+    split,
     variant,
     method,
     sequencing,
@@ -431,6 +449,7 @@ def reconstruct_cmd(
     subjects,
     window,
     progress,
+    quiet,
 ):
     """Reconstruct the 3D joints of a recording or an INPUT file and recover the image order.
 
@@ -474,9 +493,11 @@ def reconstruct_cmd(
         sequencing=sequencing,
         units=units,
         seed=seed,
+        split=split,
     )
     loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
-    if sequencing is None:
+    progress = progress and not quiet
+    if sequencing is None and not quiet:
         click.echo(
             f"sequencing: {obs.sequencing} (the richest the input supports; "
             "choose with --sequencing none|partial|full)",

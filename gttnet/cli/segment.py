@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttnet.cli._options import AFFINITY_METHODS, SPLIT_DEFAULT
 
 __all__ = ["register", "segment_cmd", "load_capture"]
 
@@ -41,10 +42,23 @@ def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
 @click.command("segment")
 @click.argument("input_path", metavar="INPUT", type=click.Path())
 @click.option(
-    "--method", default="dloe", show_default=True, help="Method giving the affinity (dloe, pseudo, gttnet)."
+    "--method",
+    type=click.Choice(AFFINITY_METHODS),
+    default="dloe",
+    show_default=True,
+    help="Method giving the affinity between images.",
 )
-@click.option("--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index.")
-@click.option("--split", default="test", show_default=True, help="Split of a recipe or dataset INPUT.")
+@click.option(
+    "--sample",
+    "-s",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Sample index in --split.",
+)
+@click.option(
+    "--split", default=SPLIT_DEFAULT, show_default=True, help="Split of a recipe or dataset directory INPUT."
+)
 @click.option(
     "--sequencing",
     type=click.Choice(["none", "partial", "full"]),
@@ -53,8 +67,21 @@ def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
     help="Sequencing the method may use (stream order links events under partial).",
 )
 @click.option("--n-events", type=click.IntRange(min=1), default=None, help="Known number of events.")
-@click.option("--model", "model_path", default=None, help="Trained model (gttnet).")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="runs/segment", show_default=True)
+@click.option(
+    "--model",
+    "model_path",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="Trained model file for --method gttnet [default: the bundled model].",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False),
+    default="runs/segment",
+    show_default=True,
+    help="Folder of labels.csv, segmentation.json and affinity.png (files in it are replaced).",
+)
 @friendly_errors
 def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_path, out_dir):
     """Segment the temporally disjoint events of INPUT and recover each event's image order.
@@ -65,8 +92,9 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
     and affinity.png.
 
     \b
-    Example:
-      gttnet segment recipes/gttdata/events.yaml --sample 2 --method dloe --out runs/segment
+    Examples:
+      gttnet segment recipes/gttdata/events.yaml --sample 1 --out runs/segment
+      gttnet segment recipes/gttdata/events.yaml --sample 0 --n-events 3 --out runs/segment_3events
     """
     import numpy as np
 
@@ -76,6 +104,8 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
 
     cap = load_capture(input_path, sample=sample, split=split)
     obs, gt = make_view(cap, sequencing)
+    if model_path is not None and method != "gttnet":
+        raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
     options = {"model": model_path} if model_path else {}
     try:
         rec, seg = segment_capture(obs, method=method, n_events=n_events, **options)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gttdata.errors import friendly_errors
+from gttnet.cli._options import SPLIT_DEFAULT
 from gttnet.errors import GttNetError
 
 if TYPE_CHECKING:
@@ -97,14 +98,26 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
     help="Input layout; auto picks it from the suffix (.h5, .mat, .json).",
 )
 @click.option(
-    "--sample", "-s", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index."
+    "--sample",
+    "-s",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Sample index in a shard file, or in --split of a dataset directory.",
+)
+@click.option(
+    "--split",
+    default=SPLIT_DEFAULT,
+    show_default=True,
+    help="Split of a dataset directory INPUT (a shard file holds one split).",
 )
 @click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
 @click.option(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
     default=None,
-    help="Length unit of a .mat/.json input [default: inch for those, m for shards].",
+    help="Length unit of a .mat/.json input; those files record none, so without --units inch is "
+    "assumed with a warning (shards are metres).",
 )
 @click.option(
     "--fps",
@@ -140,7 +153,19 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
 @friendly_errors
 def sync_cmd(
-    input_path, fmt, sample, variant, units, fps, frame_times, max_offset, drift, out_path, overwrite, as_json
+    input_path,
+    fmt,
+    sample,
+    split,
+    variant,
+    units,
+    fps,
+    frame_times,
+    max_offset,
+    drift,
+    out_path,
+    overwrite,
+    as_json,
 ):
     """Recover each camera's clock (offset, rate, drift, uncertainty) of INPUT from its 2-D skeletons.
 
@@ -154,6 +179,8 @@ def sync_cmd(
       gttnet sync data/gttdata/default/test/shard-00000.h5 --sample 0 --out runs/clocks.json --json
       gttnet sync runs/recording/project.toml --out runs/recording/clocks.json --overwrite --json
     """
+    import warnings
+
     import numpy as np
 
     from gttnet.io import load_input
@@ -172,9 +199,19 @@ def sync_cmd(
         obs, names = view.observations, list(view.camera_names)
     else:
         try:
-            loaded = load_input(
-                input_path, fmt=fmt, sequencing="partial", sample=sample, variant=variant, units=units
-            )
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", UserWarning)
+                loaded = load_input(
+                    input_path,
+                    fmt=fmt,
+                    sequencing="partial",
+                    sample=sample,
+                    variant=variant,
+                    units=units,
+                    split=split if Path(input_path).is_dir() else None,
+                )
+            for w in caught:
+                click.echo(f"warning: {w.message}", err=True)
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
         obs, gt = loaded.observations, loaded.ground_truth

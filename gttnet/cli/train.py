@@ -14,7 +14,7 @@ __all__ = ["register", "train_command"]
 
 @click.command("train")
 @click.argument("recipe", required=False, type=click.Path(dir_okay=False))
-@click.argument("overrides", nargs=-1)
+@click.argument("overrides", nargs=-1, metavar="[KEY=VALUE]...")
 @click.option(
     "--resume",
     "resume",
@@ -36,21 +36,28 @@ __all__ = ["register", "train_command"]
     "--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="Override train.device."
 )
 @click.option("--max-steps", type=int, default=None, help="Stop (with a checkpoint) after this many steps.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the result lines (implies --no-progress).")
 @friendly_errors
-def train_command(recipe, overrides, resume, out, device, max_steps, quiet, overwrite) -> None:
+def train_command(recipe, overrides, resume, out, device, max_steps, progress, quiet, overwrite) -> None:
     """Train GTT-Net with RECIPE (recipes/gttnet/*.yaml) and key.sub=value OVERRIDES.
 
     An existing run in --out is never overwritten silently: --resume continues it (same recipe),
     --overwrite replaces it.
 
-    Example: gttnet train recipes/gttnet/tiny.yaml stages.0.steps=5 --device cpu
+    \b
+    Examples:
+      gttnet train recipes/gttnet/tiny.yaml --out runs/tiny
+      gttnet train recipes/gttnet/tiny.yaml stages.0.steps=5 --device cpu --out runs/tiny_short --overwrite
+      gttnet train recipes/gttnet/tiny.yaml --out runs/tiny --resume
     """
     from gttnet.train.loop import train
     from gttnet.train.recipe import load_train_recipe
 
     if not logging.getLogger().handlers:
-        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+        logging.basicConfig(
+            level=logging.WARNING if quiet else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+        )
     if not resume and recipe is None:
         raise click.UsageError("give a RECIPE (e.g. recipes/gttnet/tiny.yaml) or --resume RUN_DIR")
     if resume == "" and out is None:
@@ -68,7 +75,7 @@ def train_command(recipe, overrides, resume, out, device, max_steps, quiet, over
             resume=True if resume == "" else resume,
             overwrite=overwrite,
             max_steps=max_steps,
-            progress=not quiet,
+            progress=progress and not quiet,
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc

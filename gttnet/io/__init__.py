@@ -7,6 +7,7 @@ sequencing condition (``Observations``) plus the ground truth when the file hold
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -90,6 +91,7 @@ def load_input(
     variant: str = "orig",
     units: str | None = None,
     seed: int | None = None,
+    split: str | None = None,
 ) -> LoadedInput:
     """Read a reconstruction input file into one sequencing view.
 
@@ -98,11 +100,14 @@ def load_input(
         fmt: ``"auto"`` (by suffix) or a key of :data:`FORMATS`.
         sequencing: ``"none"``, ``"partial"`` or ``"full"``; None: the richest the file supports
             (``full`` for shards and files with a global order, else ``partial``).
-        sample: Sample index inside a shard file, or over all splits of a dataset directory (h5 only).
+        sample: Sample index inside a shard file, or inside ``split`` of a dataset directory (h5 only).
         variant: Input variant inside a shard (h5 only).
         units: Length unit of a foreign file (key of :data:`UNITS`); None: inches for the DLOE and
-            GTT-Net layouts (their reference data). Shards are always metres.
+            GTT-Net layouts (their reference data), with a ``UserWarning`` saying so, since those files do
+            not record their unit. Shards are always metres.
         seed: Seed of the random image permutation under ``none``.
+        split: Split of a dataset directory (None: the sample index runs over all splits in manifest
+            order); a shard file holds one split and ignores it.
 
     Returns:
         The loaded input.
@@ -117,6 +122,13 @@ def load_input(
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; expected auto or one of {', '.join(FORMATS)}")
+    if units is None and _DEFAULT_UNITS[fmt] != "m":
+        warnings.warn(
+            f"{path}: the {fmt} layout records no length unit; assuming {_DEFAULT_UNITS[fmt]} (its reference "
+            "data's unit); pass --units m|mm|cm|inch to set it",
+            UserWarning,
+            stacklevel=2,
+        )
     units = _DEFAULT_UNITS[fmt] if units is None else units
     if units not in UNITS:
         raise ValueError(f"unknown units {units!r}; expected one of {', '.join(UNITS)}")
@@ -126,7 +138,17 @@ def load_input(
             raise ValueError(f"{path}: shards are stored in metres; --units {units} does not apply")
         from gttnet.io.shards import read_shard_sample
 
-        cap = read_shard_sample(path, sample=sample, variant=variant)
+        if path.is_dir() and split is not None:
+            from gttdata.shards.collection import DatasetReader
+
+            reader = DatasetReader(path, split)
+            if not 0 <= sample < len(reader):
+                raise ValueError(
+                    f"{path}: split {split!r} holds samples 0-{len(reader) - 1}, got --sample {sample}"
+                )
+            cap = reader.read_sample(sample, variant)
+        else:
+            cap = read_shard_sample(path, sample=sample, variant=variant)
         sequencing = sequencing or "full"
     else:
         cap = _read_foreign(path, fmt, units)

@@ -35,8 +35,14 @@ def test_evaluate_smoke_recipe_and_resume(tmp_path):
         assert (tmp_path / "run" / name).is_file()
     n_rows = len((tmp_path / "run" / "errors.csv").read_text().splitlines())
     assert n_rows == 1 + 2 * 3 * 3
-    again = _run(*args)
+    refused = _run(*args)  # docs/CLI.md: an existing run is neither continued nor replaced silently
+    assert refused.exit_code == 1 and "pass --resume to continue it or --overwrite" in refused.output
+    again = _run(*args, "--resume")
     assert again.exit_code == 0, again.output
+    assert len((tmp_path / "run" / "errors.csv").read_text().splitlines()) == n_rows
+    (tmp_path / "run" / "errors.csv").write_text("job_id\n")  # a damaged run: --overwrite starts again
+    fresh = _run(*args, "--overwrite")
+    assert fresh.exit_code == 0, fresh.output
     assert len((tmp_path / "run" / "errors.csv").read_text().splitlines()) == n_rows
 
 

@@ -138,4 +138,8 @@ def test_dataset_directory_input(tmp_path):
     assert json.loads(res.stdout)["sequencing"] == "full"
     assert "sequencing: full (the richest" in res.stderr  # a defaulted sequencing is said, never silent
     res = _run(tmp_path / "ds", "--sample", 10_000, "--json")
-    assert res.exit_code != 0 and "out of range" in res.output
+    assert res.exit_code != 0 and "split 'test' holds samples 0-1, got --sample 10000" in res.output
+    train = _run(tmp_path / "ds", "--split", "train", "--sample", 3, "--method", "pseudo", "--json")
+    assert train.exit_code == 0, train.output  # the tiny train split has 4 samples, test only 2
+    bad = _run(tmp_path / "ds", "--split", "nope", "--json")
+    assert bad.exit_code == 1 and "nope" in bad.output and "Traceback" not in bad.output
