@@ -14,7 +14,7 @@ gttdata inspect "$DATA"
 test_shard="$DATA/test/shard-00000.h5"
 for method in pseudo dloe gttnet; do
   gttnet reconstruct "$test_shard" --sample 0 --method "$method" --sequencing none \
-    --out "$RUN/test0_${method}.h5" --json | tee "$RUN/test0_${method}.json"
+    --out "$RUN/test0_${method}.h5" --overwrite --json | tee "$RUN/test0_${method}.json"
 done
 
 gttnet evaluate recipes/gttnet/eval_smoke.yaml --out "$RUN/eval_smoke" --resume
