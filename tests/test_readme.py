@@ -55,6 +55,21 @@ def _check_reconstruct_dloe(out: str) -> None:
     assert Path("runs/rec.h5").is_file()
 
 
+def _check_reconstruct_json(out: str) -> None:
+    """The exported JSON gives the shard's own answer: units round-trip through inches."""
+    d = _json(out)
+    assert d["method"] == "dloe" and d["sequencing"] == "partial" and d["n_joints"] == 31, d
+    shard = _json(
+        _invoke(
+            shlex.split(
+                "gttnet reconstruct data/gttdata/default/test/shard-00000.h5 --sample 0 --method dloe "
+                "--sequencing partial --json"
+            )
+        )
+    )
+    assert d["mpjpe_mm"] == pytest.approx(shard["mpjpe_mm"], abs=0.05), (d, shard)
+
+
 def _check_segment(out: str) -> None:
     ari = float(re.search(r"\bari=(\S+)", out).group(1))
     assert "n_events=2" in out and ari == pytest.approx(1.0), out  # the README's claim for sample 1
@@ -152,6 +167,11 @@ CHECKS: dict[str, Check] = {
         lambda out: "verified" in out or pytest.fail(out),
     ),
     "gttnet reconstruct data/gttdata/multi_subject/test/shard-00000.h5 --subjects 2": (None, _check_subjects),
+    "gttnet export-json data/gttdata/default": (
+        lambda a: a,
+        lambda out: "runs/capture.json: " in out and " inch" in out or pytest.fail(out),
+    ),
+    "gttnet reconstruct runs/capture.json --units inch": (lambda a: a, _check_reconstruct_json),
     "gttdata generate recipes/gttdata/tiny.yaml --resume": (
         lambda a: [*a, "--no-progress"],
         lambda out: "data/gttdata/tiny/manifest.json verified" in out or pytest.fail(out),
