@@ -48,5 +48,13 @@ def test_missing_shard_names_the_file(tiny_data, tmp_path):
     root = tmp_path / "d"
     shutil.copytree(tiny_data, root)
     (root / "train/shard-00000.h5").unlink()
-    line = one_line_error(CliRunner().invoke(main, ["preview", str(root), "--out", str(tmp_path / "p")]))
+    args = [
+        "preview",
+        str(root),
+        "--split",
+        "train",
+        "--out",
+        str(tmp_path / "p"),
+    ]  # --split defaults to test
+    line = one_line_error(CliRunner().invoke(main, args))
     assert "None" not in line and "train/shard-00000.h5" in line
