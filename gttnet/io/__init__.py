@@ -139,7 +139,7 @@ def load_input(
         from gttnet.io.shards import read_shard_sample
 
         if path.is_dir() and split is not None:
-            from gttdata.shards.collection import DatasetReader
+            from gttdata.dataset import DatasetReader
 
             reader = DatasetReader(path, split)
             if not 0 <= sample < len(reader):
