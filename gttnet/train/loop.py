@@ -267,17 +267,21 @@ def train(
         :class:`RunResult`.
     """
     rank0 = int(os.environ.get("RANK", "0")) == 0
-    if rank0:
-        recipe, payload, out = open_run(recipe, out=out, resume=resume, overwrite=overwrite)
-    elif resume is not None and not isinstance(resume, bool):
-        payload = load_checkpoint(resume)
-        recipe, out = parse_train_recipe(payload["recipe"]), resume
-    else:
-        ck = Path(out) / CHECKPOINT_NAME if out is not None and resume else None
-        payload = load_checkpoint(ck.parent) if ck is not None and ck.is_file() else None
-    if recipe is None:
-        raise ValueError("train() needs a recipe or a run directory to resume")
-    with OutputLock(out, "gttnet train") if rank0 and out is not None else contextlib.nullcontext():
+    folder = (
+        out if out is not None else (resume if resume is not None and not isinstance(resume, bool) else None)
+    )
+    # The lock comes first: a second trainer must not inspect or delete (--overwrite) a run in progress.
+    with OutputLock(folder, "gttnet train") if rank0 and folder is not None else contextlib.nullcontext():
+        if rank0:
+            recipe, payload, out = open_run(recipe, out=out, resume=resume, overwrite=overwrite)
+        elif resume is not None and not isinstance(resume, bool):
+            payload = load_checkpoint(resume)
+            recipe, out = parse_train_recipe(payload["recipe"]), resume
+        else:
+            ck = Path(out) / CHECKPOINT_NAME if out is not None and resume else None
+            payload = load_checkpoint(ck.parent) if ck is not None and ck.is_file() else None
+        if recipe is None:
+            raise ValueError("train() needs a recipe or a run directory to resume")
         return _train(recipe, payload, out, device, max_steps, progress)
 
 

@@ -135,8 +135,12 @@ def test_resume_refuses_a_run_of_another_recipe(tmp_path):
 
 @pytest.mark.slow
 def test_resume_continues_and_overwrite_replaces(tmp_path):
+    from gttnet.train.loop import train
+    from gttnet.train.recipe import load_train_recipe
+
     over = _OVER
-    _interrupted_run(tmp_path)
+    recipe = load_train_recipe("recipes/gttnet/tiny.yaml", over)
+    train(recipe, out=tmp_path / "r", max_steps=1, progress=False)  # a real interrupted run
     res = CliRunner().invoke(
         main,
         ["train", "recipes/gttnet/tiny.yaml", *over, "--out", str(tmp_path / "r"), "--resume", "--quiet"],
@@ -176,3 +180,32 @@ def test_checkpoint_on_a_full_disk_is_one_line_and_keeps_the_old_one(run_dir, sm
                         state=LoopState(global_step=9), recipe={"name": "x"})  # fmt: skip
     assert load_checkpoint(run)["state"].global_step == 3
     assert not [p for p in run.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_second_trainer_on_a_run_folder_is_refused(tmp_path):
+    """One writer per run folder: a held lock refuses ``gttnet train --out`` with the holder's PID."""
+    import os
+
+    from gttdata.fileio import OutputLock
+
+    run = tmp_path / "r"
+    with OutputLock(run, "gttnet train"):  # flock conflicts across open files, even in one process
+        line = one_line_error(
+            CliRunner().invoke(
+                main, ["train", "recipes/gttnet/tiny.yaml", *_OVER, "--out", str(run), "--resume"]
+            )
+        )
+    assert f"PID {os.getpid()}" in line and str(run) in line
+
+
+def test_overwrite_never_deletes_a_run_in_progress(tmp_path):
+    """The lock is taken before ``--overwrite`` deletes anything."""
+    from gttdata.fileio import OutputLock
+
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "log.jsonl").write_text("running\n")
+    with OutputLock(run, "gttnet train"):
+        args = ["train", "recipes/gttnet/tiny.yaml", *_OVER, "--out", str(run), "--overwrite"]
+        line = one_line_error(CliRunner().invoke(main, args))
+    assert "PID" in line and (run / "log.jsonl").read_text() == "running\n"
