@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,15 +42,13 @@ class MethodChoice(click.Choice):
         super().__init__((), case_sensitive=True)
 
     @property
-    def choices(self) -> Sequence[Any]:
+    def choices(self) -> tuple[Any, ...]:
         from gttnet.methods import available_methods
 
         return tuple(available_methods())
 
     @choices.setter
-    def choices(
-        self, value: Sequence[Any]
-    ) -> None:  # click.Choice.__init__ assigns it; the registry is the source
+    def choices(self, value: Any) -> None:  # click.Choice.__init__ assigns it; the registry is the source
         pass
 
 
