@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 from typing import overload
 
@@ -311,6 +312,29 @@ def undistort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     Returns:
         Undistorted pixels, shape ``(..., 2)``.
     """
+
+    def undistort(xy: np.ndarray) -> np.ndarray:
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+        dist = np.asarray(camera.dist, dtype=np.float64)
+        und = cv2.undistortPoints(xy.reshape(-1, 1, 2), camera.K, dist, None, None, camera.K, crit)
+        return np.asarray(und).reshape(-1, 2)
+
+    return _map_finite_pixels(pixels, camera, undistort)
+
+
+def _map_finite_pixels(
+    pixels: np.ndarray, camera: Camera, fn: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """``fn`` applied to the finite pixels, shape ``(M, 2)`` in and out; NaN rows stay NaN; a copy without distortion.
+
+    Args:
+        pixels: Pixels, shape ``(..., 2)``.
+        camera: The camera; with all-zero ``dist`` the pixels are returned unchanged (as a float64 copy).
+        fn: The pixel map on finite rows.
+
+    Returns:
+        Mapped pixels, shape ``(..., 2)`` float64.
+    """
     px = np.asarray(pixels, dtype=np.float64)
     if not np.any(np.asarray(camera.dist)):
         return px.copy()
@@ -318,11 +342,7 @@ def undistort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     ok = np.all(np.isfinite(flat), axis=1)
     out = np.full_like(flat, np.nan)
     if ok.any():
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-        src = flat[ok].reshape(-1, 1, 2)
-        dist = np.asarray(camera.dist, dtype=np.float64)
-        und = cv2.undistortPoints(src, camera.K, dist, None, None, camera.K, crit)
-        out[ok] = und.reshape(-1, 2)
+        out[ok] = fn(flat[ok])
     return out.reshape(px.shape)
 
 
@@ -338,15 +358,9 @@ def distort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     Returns:
         Distorted pixels, shape ``(..., 2)``.
     """
-    px = np.asarray(pixels, dtype=np.float64)
-    if not np.any(np.asarray(camera.dist)):
-        return px.copy()
-    flat = px.reshape(-1, 2)
-    ok = np.all(np.isfinite(flat), axis=1)
-    out = np.full_like(flat, np.nan)
-    if ok.any():
-        Kinv = np.linalg.inv(camera.K)
-        xn = np.concatenate([flat[ok], np.ones((int(ok.sum()), 1))], axis=1) @ Kinv.T
+
+    def distort(xy: np.ndarray) -> np.ndarray:
+        xn = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1) @ np.linalg.inv(camera.K).T
         xn /= xn[:, 2:3]
         proj, _ = cv2.projectPoints(
             xn.reshape(-1, 1, 3),
@@ -355,5 +369,6 @@ def distort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
             camera.K,
             np.asarray(camera.dist, dtype=np.float64),
         )
-        out[ok] = proj.reshape(-1, 2)
-    return out.reshape(px.shape)
+        return np.asarray(proj).reshape(-1, 2)
+
+    return _map_finite_pixels(pixels, camera, distort)

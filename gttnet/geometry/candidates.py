@@ -23,11 +23,14 @@ the exact pair cost of the candidates, not the descriptor distance, ranks the fi
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from gttnet.errors import GttNetError
+from gttnet.geometry.triangulation import fill_from_donors, project_lone
 
 __all__ = [
     "DENSE_MAX_IMAGES",
@@ -165,23 +168,45 @@ def candidate_partners(
     vis = np.asarray(visible, dtype=bool)
     r = _unit_rays(np.asarray(rays, dtype=np.float64), vis)
     cam = np.asarray(cam_id)
-    cams = np.unique(cam)
-    n = cam.shape[0]
-    members = {c: np.nonzero(cam == c)[0] for c in cams}
-    centre_of = {c: C[members[c]].mean(0) for c in cams}
-    out = np.full((n, max(len(cams) - 1, 1) * per_camera), -1, dtype=np.int64)
-    for a in cams:
-        ia = members[a]
+    members = _camera_members(cam)
+    centre_of = {c: C[ic].mean(0) for c, ic in members.items()}
+
+    def nearest(a: Any, b: Any, kq: int) -> np.ndarray:
+        ia, ib = members[a], members[b]
+        da = epipolar_descriptors(r[ia], vis[ia], centre_of[a], centre_of[b])
+        db = epipolar_descriptors(r[ib], vis[ib], centre_of[a], centre_of[b])
+        return np.asarray(cKDTree(db).query(da, k=kq)[1])
+
+    return _partners_per_camera(members, per_camera, nearest)
+
+
+def _camera_members(cam: np.ndarray) -> dict[Any, np.ndarray]:
+    """Image indices of each camera, shape ``(N_c,)`` each, keyed by camera id in sorted order."""
+    return {c: np.nonzero(cam == c)[0] for c in np.unique(cam)}
+
+
+def _partners_per_camera(
+    members: dict[Any, np.ndarray], per_camera: int, nearest: Callable[[Any, Any, int], np.ndarray]
+) -> np.ndarray:
+    """Partner table from ``nearest(a, b, k)``: for each image of camera ``a``, its ``k`` nearest of camera ``b``.
+
+    Args:
+        members: Image indices of each camera (:func:`_camera_members`).
+        per_camera: Slots given to each other camera.
+        nearest: Indices into ``members[b]``, shape ``(len(members[a]), k)`` (or ``(len(members[a]),)`` for k = 1).
+
+    Returns:
+        Partner image indices, shape ``(N, (V - 1) * per_camera)`` int64, ``-1`` where a camera has fewer images.
+    """
+    n = sum(ic.size for ic in members.values())
+    out = np.full((n, max(len(members) - 1, 1) * per_camera), -1, dtype=np.int64)
+    for a, ia in members.items():
         slot = 0
-        for b in cams:
+        for b, ib in members.items():
             if b == a:
                 continue
-            ib = members[b]
             kq = min(per_camera, ib.size)
-            da = epipolar_descriptors(r[ia], vis[ia], centre_of[a], centre_of[b])
-            db = epipolar_descriptors(r[ib], vis[ib], centre_of[a], centre_of[b])
-            _, nn = cKDTree(db).query(da, k=kq)
-            out[ia, slot : slot + kq] = ib[np.asarray(nn).reshape(ia.size, kq)]
+            out[ia, slot : slot + kq] = ib[nearest(a, b, kq).reshape(ia.size, kq)]
             slot += per_camera
     return out
 
@@ -266,23 +291,14 @@ def _pose_partners(X: np.ndarray, cam: np.ndarray, per_camera: int) -> np.ndarra
     """Nearest images of each other camera under the 3-D pose descriptor ``X.reshape(N, 3 J)``, ``(N, M)``."""
     from scipy.spatial import cKDTree
 
-    n = X.shape[0]
-    flat = X.reshape(n, -1)
-    cams = np.unique(cam)
-    out = np.full((n, max(len(cams) - 1, 1) * per_camera), -1, dtype=np.int64)
-    members = {c: np.nonzero(cam == c)[0] for c in cams}
-    trees = {c: cKDTree(flat[members[c]]) for c in cams}
-    for a in cams:
-        ia = members[a]
-        slot = 0
-        for b in cams:
-            if b == a:
-                continue
-            kq = min(per_camera, members[b].size)
-            _, nn = trees[b].query(flat[ia], k=kq)
-            out[ia, slot : slot + kq] = members[b][np.asarray(nn).reshape(ia.size, kq)]
-            slot += per_camera
-    return out
+    flat = X.reshape(X.shape[0], -1)
+    members = _camera_members(cam)
+    trees = {c: cKDTree(flat[ic]) for c, ic in members.items()}
+
+    def nearest(a: Any, b: Any, kq: int) -> np.ndarray:
+        return np.asarray(trees[b].query(flat[members[a]], k=kq)[1])
+
+    return _partners_per_camera(members, per_camera, nearest)
 
 
 def _new_only(cand: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -418,24 +434,6 @@ def _initial_structure(
     first_nb = np.argmin(kf, axis=1)
     found = np.take_along_axis(kf, first_nb[:, None, :], axis=1)[:, 0] < big
     donor = np.take_along_axis(nb, first_nb, axis=1)
-    out = X.copy()
-    fill = ~have & found
-    out[fill] = X[donor[fill], np.nonzero(fill)[1]]
-    rest = ~have & ~found
-    if rest.any():
-        cnt = have.sum(0)
-        joint_mean = np.where(have[..., None], X, 0.0).sum(0) / np.maximum(cnt, 1)[:, None]
-        img_cnt = have.sum(1)
-        img_mean = np.where(have[..., None], X, 0.0).sum(1) / np.maximum(img_cnt, 1)[:, None]
-        glob = X[have].mean(0) if have.any() else np.zeros(3)
-        pick = np.where(
-            (cnt > 0)[None, :, None],
-            joint_mean[None],
-            np.where((img_cnt > 0)[:, None, None], img_mean[:, None], glob),
-        )
-        out[rest] = pick[rest]
-    lone = vis & ~have
-    if lone.any():
-        dep = np.maximum(np.einsum("njk,njk->nj", out - C[:, None], r), 1e-3)
-        out = np.where(lone[..., None], C[:, None] + dep[..., None] * r, out)
+    out = fill_from_donors(X, have, found, donor)
+    out = project_lone(out, C, r, vis & ~have)
     return out, src.astype(np.int64)

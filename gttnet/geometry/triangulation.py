@@ -123,23 +123,39 @@ def _pair_block(
 
 def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np.ndarray) -> np.ndarray:
     """Fill joints without a triangulation from the best-ranked neighbour that has one, else fallbacks."""
-    n, j, _ = X.shape
     ranked_finite = np.take_along_axis(finite, order, axis=1)
     cand = have[order] & ranked_finite[:, :, None]  # (N, N, J): k-th ranked neighbour has joint p
     first = np.argmax(cand, axis=1)  # (N, J)
     found = np.take_along_axis(cand, first[:, None, :], axis=1)[:, 0]
     nb = np.take_along_axis(order, first, axis=1)
+    return fill_from_donors(X, have, found, nb)
+
+
+def fill_from_donors(X: np.ndarray, have: np.ndarray, found: np.ndarray, donor: np.ndarray) -> np.ndarray:
+    """Joints without their own triangulation taken from a donor image, else from means of the triangulated ones.
+
+    Where no donor has the joint: the joint's mean over all images that have it, else the image's centroid of
+    its triangulated joints, else the mean of every triangulated joint (the origin when there is none).
+
+    Args:
+        X: Estimated joints in world, metres, shape ``(N, J, 3)`` (meaningful where ``have``).
+        have: Joints with their own triangulation, shape ``(N, J)`` bool.
+        found: Joints for which ``donor`` names an image that has the joint, shape ``(N, J)`` bool.
+        donor: The donor image of each joint, shape ``(N, J)`` int (used where ``found``).
+
+    Returns:
+        The filled joints, shape ``(N, J, 3)``.
+    """
     out = X.copy()
     fill = ~have & found
-    out[fill] = X[nb[fill], np.nonzero(fill)[1]]
+    out[fill] = X[donor[fill], np.nonzero(fill)[1]]
     rest = ~have & ~found
     if rest.any():
-        # No ranked neighbour has this joint: the joint's mean over all images, else the image centroid.
         cnt = have.sum(0)
         joint_mean = np.where(have[..., None], X, 0.0).sum(0) / np.maximum(cnt, 1)[:, None]
         img_cnt = have.sum(1)
         img_mean = np.where(have[..., None], X, 0.0).sum(1) / np.maximum(img_cnt, 1)[:, None]
-        glob = X[have].mean(0)
+        glob = X[have].mean(0) if have.any() else np.zeros(3)
         pick = np.where(
             (cnt > 0)[None, :, None],
             joint_mean[None],
@@ -147,6 +163,24 @@ def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np
         )
         out[rest] = pick[rest]
     return out
+
+
+def project_lone(X: np.ndarray, C: np.ndarray, r: np.ndarray, lone: np.ndarray) -> np.ndarray:
+    """Joints in ``lone`` (visible but triangulated with no partner) moved onto their own ray, at least 1 mm deep.
+
+    Args:
+        X: Estimated joints in world, metres, shape ``(N, J, 3)``.
+        C: Camera centre of each image in world, metres, shape ``(N, 3)``.
+        r: Unit viewing rays in world, shape ``(N, J, 3)``.
+        lone: Joints to project, shape ``(N, J)`` bool.
+
+    Returns:
+        The joints, shape ``(N, J, 3)``: ``X`` where not ``lone``.
+    """
+    if not lone.any():
+        return X
+    depth = np.maximum(np.einsum("njk,njk->nj", X - C[:, None], r), 1e-3)
+    return np.where(lone[..., None], C[:, None] + depth[..., None] * r, X)
 
 
 def pseudo_triangulate(
@@ -280,8 +314,5 @@ def _initial_structure(
     s, _, _ = closest_points_on_rays(C[rows], r, C[m], r[m, np.arange(j)[None, :]])
     X = C[:, None, :] + np.where(have, s, 0.0)[..., None] * np.where(have[..., None], r, 0.0)
     X = _fill_missing(X, have, order, finite)
-    lone = vis & ~have  # visible but valid for no pair: project the filled estimate onto the own ray
-    if lone.any():
-        depth = np.maximum(np.einsum("njk,njk->nj", X - C[:, None], r), 1e-3)
-        X = np.where(lone[..., None], C[:, None] + depth[..., None] * r, X)
+    X = project_lone(X, C, r, vis & ~have)  # visible but valid for no pair: onto the own ray
     return X, src.astype(np.int64)
