@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gttdata.mocap.motion import Motion
+from gttdata.mocap.procedural._request import check_request, draw_scale
 from gttdata.skeletons import get_skeleton
 
 __all__ = ["HAND_KINDS", "generate_hand_motion"]
@@ -90,14 +91,9 @@ def generate_hand_motion(
         A Motion on ``get_skeleton("hand21")``: metres, world z up, the wrist about 1.2 m above the
         floor and centred on the origin in xy.
     """
-    if kind not in HAND_KINDS:
-        raise ValueError(f"unknown hand motion kind {kind!r}; expected one of {', '.join(HAND_KINDS)}")
-    if seed < 0 or duration_s <= 0 or fps_hz < 10:
-        raise ValueError(f"need seed >= 0, duration_s > 0, fps_hz >= 10; got {seed}, {duration_s}, {fps_hz}")
+    check_request("hand", kind, HAND_KINDS, seed, duration_s, fps_hz)
     rng = np.random.default_rng([int(seed), 0x68616E64])
-    s = float(rng.uniform(0.85, 1.15) if hand_scale is None else hand_scale)
-    if not 0.6 <= s <= 1.5:
-        raise ValueError(f"hand_scale must be in [0.6, 1.5], got {s}")
+    s = draw_scale(rng, hand_scale, "hand_scale", draw=(0.85, 1.15), allowed=(0.6, 1.5))
     n = int(round(duration_s * fps_hz)) + 1
     t = np.arange(n) / fps_hz
     flex, spread = _angles(kind, rng, t)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gttdata.mocap.motion import Motion
+from gttdata.mocap.procedural._request import check_request, draw_scale
 from gttdata.skeletons import QUADRUPED36_JOINTS, quadruped36
 
 __all__ = ["QUADRUPED_KINDS", "generate_quadruped_motion"]
@@ -101,16 +102,9 @@ def generate_quadruped_motion(
     Returns:
         A Motion on :func:`gttdata.skeletons.quadruped36`, metres, z up, floor at z = 0, centred on the origin in xy.
     """
-    if kind not in QUADRUPED_KINDS:
-        raise ValueError(
-            f"unknown quadruped motion kind {kind!r}; expected one of {', '.join(QUADRUPED_KINDS)}"
-        )
-    if seed < 0 or duration_s <= 0 or fps_hz < 10:
-        raise ValueError(f"need seed >= 0, duration_s > 0, fps_hz >= 10; got {seed}, {duration_s}, {fps_hz}")
+    check_request("quadruped", kind, QUADRUPED_KINDS, seed, duration_s, fps_hz)
     rng = np.random.default_rng([int(seed), 0x71756164])
-    s = float(rng.uniform(0.6, 1.4) if body_scale is None else body_scale)
-    if not 0.5 <= s <= 2.0:
-        raise ValueError(f"body_scale must be in [0.5, 2], got {s}")
+    s = draw_scale(rng, body_scale, "body_scale", draw=(0.6, 1.4), allowed=(0.5, 2.0))
     g = s * rng.uniform(0.93, 1.07, 12)  # per-segment proportion noise
     trunk, neck_l, head_l, muzzle, ear_off = 0.50 * g[0], 0.12 * g[1], 0.10 * g[2], 0.09 * g[3], 0.05 * g[2]
     f1, f2, f3, toe = 0.16 * g[4], 0.16 * g[5], 0.07 * g[6], 0.035 * g[6]
