@@ -29,6 +29,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _table import fmt  # noqa: E402
 
 import gttnet.geometry.candidates as cand_mod  # noqa: E402
 from gttdata.capture.views import make_view  # noqa: E402
@@ -60,10 +61,6 @@ def true_neighbours(t: np.ndarray, cam: np.ndarray, k: int) -> np.ndarray:
 
 def recall(found: np.ndarray, ref: np.ndarray) -> float:
     return float(np.mean([len(set(a[a >= 0]) & set(b)) / len(b) for a, b in zip(found, ref, strict=True)]))
-
-
-def fmt(xs: list[float], spec: str = ".2f") -> str:
-    return f"{statistics.median(xs):{spec}} ({min(xs):{spec}}..{max(xs):{spec}})"
 
 
 def main() -> None:

@@ -28,6 +28,8 @@ import sys
 import time
 from pathlib import Path
 
+from _table import fmt
+
 REPO = Path(__file__).resolve().parents[1]
 RECIPE = REPO / "recipes" / "gttdata" / "long.yaml"
 CONFIGS = {
@@ -80,10 +82,6 @@ def run_child(cmd: list[str]) -> tuple[float, float, float, dict]:
         raise RuntimeError(f"{' '.join(cmd)} failed with status {proc.returncode}")
     summary = json.loads(out.decode().strip().splitlines()[-1])
     return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0, summary
-
-
-def fmt(xs: list[float], spec: str) -> str:
-    return f"{statistics.median(xs):{spec}} ({min(xs):{spec}}..{max(xs):{spec}})"
 
 
 def main() -> None:

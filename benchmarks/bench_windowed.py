@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import torch  # noqa: E402
+from _table import fmt  # noqa: E402
 
 from gttdata.capture.views import make_view  # noqa: E402
 from gttdata.generate_plan import build_sample  # noqa: E402
@@ -28,10 +28,6 @@ from gttdata.recipe import load_recipe  # noqa: E402
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm  # noqa: E402
 from gttnet.methods import reconstruct  # noqa: E402
 from gttnet.windowed import auto_window, reconstruct_windowed  # noqa: E402
-
-
-def fmt(xs: list[float], spec: str = ".2f") -> str:
-    return f"{statistics.median(xs):{spec}} ({min(xs):{spec}}..{max(xs):{spec}})"
 
 
 def main() -> None:
