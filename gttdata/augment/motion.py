@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gttdata.augment.registry import register_augmentation
+from gttdata.augment.registry import fires, register_augmentation
 from gttdata.mocap.motion import Motion
 
 __all__ = ["bone_scale", "decorrelate", "mirror"]
@@ -79,7 +79,7 @@ def decorrelate(
         max_angle_deg: Largest rotation angle per joint, degrees.
         max_shift_m: Largest translation per axis per joint, metres.
     """
-    if prob <= 0 or rng.random() >= prob:
+    if not fires(rng, prob):
         return motion
     j = motion.skeleton.n_joints
     axes = rng.normal(size=(j, 3))

@@ -6,10 +6,13 @@ import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
+
 __all__ = [
     "AUGMENT_LEVELS",
     "Augmentation",
     "available_augmentations",
+    "fires",
     "get_augmentation",
     "register_augmentation",
     "validate_augmentation",
@@ -20,6 +23,22 @@ __all__ = [
 AUGMENT_LEVELS: tuple[str, ...] = ("capture", "motion")
 
 _REGISTRY: dict[str, Augmentation] = {}
+
+
+def fires(rng: np.random.Generator, prob: float) -> bool:
+    """Whether an augmentation applied with probability ``prob`` fires this time.
+
+    Draws one number from ``rng`` only when ``prob > 0``, so recipes that leave a control at 0 keep
+    their random streams (and shards) unchanged.
+
+    Args:
+        rng: Random generator.
+        prob: Probability of firing, in [0, 1].
+
+    Returns:
+        True with probability ``prob``.
+    """
+    return not (prob <= 0 or rng.random() >= prob)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gttdata.augment.registry import register_augmentation
+from gttdata.augment.registry import fires, register_augmentation
 from gttdata.mocap.motion import Motion
 from gttdata.skeleton import Skeleton
 
@@ -166,7 +166,7 @@ def joint_subset(
 
     Nothing is drawn when ``prob`` is 0, so recipes without it keep their random streams.
     """
-    if prob <= 0 or rng.random() >= prob:
+    if not fires(rng, prob):
         return motion
     return subset_map(motion.skeleton, rng, min_keep=min_keep)(motion)
 
@@ -176,7 +176,7 @@ def merge_joints(
     motion: Motion, rng: np.random.Generator, *, prob: float = 1.0, max_merged: float = 0.25
 ) -> Motion:
     """With probability ``prob``, merge random joints into their parents (see :func:`merge_map`)."""
-    if prob <= 0 or rng.random() >= prob:
+    if not fires(rng, prob):
         return motion
     return merge_map(motion.skeleton, rng, max_merged=max_merged)(motion)
 
@@ -186,6 +186,6 @@ def marker_offsets(
     motion: Motion, rng: np.random.Generator, *, prob: float = 1.0, max_frac: float = 0.25
 ) -> Motion:
     """With probability ``prob``, replace the joints by markers offset along the bones (see :func:`marker_map`)."""
-    if prob <= 0 or rng.random() >= prob:
+    if not fires(rng, prob):
         return motion
     return marker_map(motion.skeleton, rng, max_frac=max_frac)(motion)
