@@ -214,13 +214,18 @@ def test_detect_format(tmp_path):
         detect_format(tmp_path / "x.txt")
 
 
-def test_shard_input(tmp_path, toy_sample):
+@pytest.fixture
+def toy_shard(tmp_path, toy_sample):
+    """One shard file holding ``toy_sample`` (split ``test``)."""
     writer = pytest.importorskip("gttdata.shards.writer")
     pytest.importorskip("gttdata.shards.reader")
     with writer.ShardWriter(tmp_path, split="test") as w:
         w.write(toy_sample)
-    shard = sorted(tmp_path.glob("*.h5"))[0]
-    loaded = load_input(shard, sequencing="partial")
+    return sorted(tmp_path.glob("*.h5"))[0]
+
+
+def test_shard_input(toy_shard, toy_sample):
+    loaded = load_input(toy_shard, sequencing="partial")
     ref_obs, ref_gt = make_view(toy_sample, "partial")
     np.testing.assert_allclose(loaded.observations.rays(), ref_obs.rays(), atol=1e-6)
     np.testing.assert_array_equal(loaded.image_index, ref_gt.perm)
@@ -252,11 +257,6 @@ def test_output_round_trip(tmp_path, suffix):
         write_reconstruction(rec, tmp_path / "out.csv")
 
 
-def test_shard_bad_sample_index(tmp_path, toy_sample):
-    writer = pytest.importorskip("gttdata.shards.writer")
-    pytest.importorskip("gttdata.shards.reader")
-    with writer.ShardWriter(tmp_path, split="test") as w:
-        w.write(toy_sample)
-    shard = sorted(tmp_path.glob("*.h5"))[0]
+def test_shard_bad_sample_index(toy_shard):
     with pytest.raises(ImportFormatError, match="variant 'nope'"):
-        load_input(shard, variant="nope")
+        load_input(toy_shard, variant="nope")
