@@ -19,40 +19,14 @@ from __future__ import annotations
 
 import click
 
+from gttdata._cli_common import version_option
 from gttdata.errors import friendly_errors
 
 __all__ = ["main", "friendly_errors"]
 
 
-def _versions() -> str:
-    names = ("gtt", "numpy", "scipy", "h5py", "opencv-python-headless", "click", "pyyaml")
-    out = []
-    import importlib.metadata as md
-
-    for n in names:
-        try:
-            out.append(f"{n} {md.version(n)}")
-        except md.PackageNotFoundError:
-            out.append(f"{n} (not installed)")
-    return ", ".join(out)
-
-
-def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
-    if not value or ctx.resilient_parsing:
-        return
-    click.echo(f"gttdata {_versions()}")
-    ctx.exit()
-
-
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.option(
-    "--version",
-    is_flag=True,
-    expose_value=False,
-    is_eager=True,
-    callback=_print_version,
-    help="Show the versions of gtt and its main dependencies, then exit.",
-)
+@version_option("gttdata", ("gtt", "numpy", "scipy", "h5py", "opencv-python-headless", "click", "pyyaml"))
 def main() -> None:
     """Simulate unsynchronized multi-camera captures from mocap and write them as HDF5 shards."""
 

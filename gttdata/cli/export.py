@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from gttdata._cli_common import sample_options
 from gttdata.errors import friendly_errors
 
 __all__ = ["export_cmd", "register"]
@@ -31,11 +32,7 @@ def _read_sample(source: Path, split: str, sample: int, variant: str):
 
 @click.command("export")
 @click.argument("source", metavar="DATASET|SHARD", type=click.Path(exists=True, path_type=Path))
-@click.option("--split", default="test", show_default=True, help="Split of a dataset directory.")
-@click.option(
-    "-s", "--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index."
-)
-@click.option("--variant", default="orig", show_default=True, help="Input variant to export.")
+@sample_options("Sample index.", "Split of a dataset directory.", "Input variant to export.")
 @click.option(
     "--format",
     "fmt",

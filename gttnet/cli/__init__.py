@@ -19,37 +19,13 @@ from __future__ import annotations
 
 import click
 
+from gttdata._cli_common import version_option
+
 __all__ = ["main"]
 
 
-def _versions() -> str:
-    out = []
-    import importlib.metadata as md  # metadata lookups cost tens of ms: only on --version
-
-    for n in ("gtt", "torch", "numpy", "scipy"):
-        try:
-            out.append(f"{n} {md.version(n)}")
-        except md.PackageNotFoundError:
-            out.append(f"{n} (not installed)")
-    return ", ".join(out)
-
-
-def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
-    if not value or ctx.resilient_parsing:
-        return
-    click.echo(f"gttnet {_versions()}")
-    ctx.exit()
-
-
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.option(
-    "--version",
-    is_flag=True,
-    expose_value=False,
-    is_eager=True,
-    callback=_print_version,
-    help="Show the versions of gtt and its main dependencies, then exit.",
-)
+@version_option("gttnet", ("gtt", "torch", "numpy", "scipy"))
 def main() -> None:
     """Reconstruct dynamic 3D skeletons from unsynchronized multi-camera 2-D observations."""
 

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-__all__ = ["AFFINITY_METHODS", "SPLIT_DEFAULT"]
+from gttdata._cli_common import SPLIT_DEFAULT
+
+__all__ = ["AFFINITY_METHODS", "SPLIT_DEFAULT", "STORED_SAMPLE_HELP", "STORED_SPLIT_HELP"]
 
 #: The registered methods that return an affinity between images (segmentation, two subjects), spelled out
 #: so that ``--help`` needs no torch; tests/test_cli_convention.py checks they are registered.
 AFFINITY_METHODS: tuple[str, ...] = ("dloe", "gttnet", "pseudo")
 
-#: Default ``--split`` of every command that reads a dataset folder.
-SPLIT_DEFAULT = "test"
+#: ``--sample``/``--split`` help of the commands that read one stored capture (shard file or dataset folder).
+STORED_SAMPLE_HELP = "Sample index in a shard file, or in --split of a dataset directory."
+STORED_SPLIT_HELP = "Split of a dataset directory INPUT (a shard file holds one split)."

@@ -6,6 +6,7 @@ import json
 
 import click
 
+from gttdata._cli_common import sample_options
 from gttdata.errors import friendly_errors
 
 __all__ = ["export_json_cmd", "register"]
@@ -13,11 +14,7 @@ __all__ = ["export_json_cmd", "register"]
 
 @click.command("export-json")
 @click.argument("input_path", metavar="INPUT", type=click.Path())
-@click.option(
-    "-s", "--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample index."
-)
-@click.option("--split", default="test", show_default=True, help="Split of a recipe or dataset INPUT.")
-@click.option("--variant", default="orig", show_default=True, help="Stored variant of the sample.")
+@sample_options("Sample index.", "Split of a recipe or dataset INPUT.", "Stored variant of the sample.")
 @click.option(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),

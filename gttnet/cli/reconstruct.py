@@ -10,8 +10,9 @@ from typing import Any
 
 import click
 
+from gttdata._cli_common import sample_options
 from gttdata.errors import RigError, friendly_errors
-from gttnet.cli._options import SPLIT_DEFAULT
+from gttnet.cli._options import STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 
 __all__ = ["register", "reconstruct_cmd"]
 
@@ -342,21 +343,7 @@ def _resolve_input(
     show_default=True,
     help="Layout of a single INPUT file; auto picks it from the suffix (.h5, .mat, .json).",
 )
-@click.option(
-    "-s",
-    "--sample",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default=True,
-    help="Sample index in a shard file, or in --split of a dataset directory.",
-)
-@click.option(
-    "--split",
-    default=SPLIT_DEFAULT,
-    show_default=True,
-    help="Split of a dataset directory INPUT (a shard file holds one split).",
-)
-@click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
+@sample_options(STORED_SAMPLE_HELP, STORED_SPLIT_HELP)
 @click.option(
     "--method",
     type=MethodChoice(),

@@ -11,8 +11,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from gttdata._cli_common import sample_options
 from gttdata.errors import friendly_errors
-from gttnet.cli._options import SPLIT_DEFAULT
+from gttnet.cli._options import STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 from gttnet.errors import GttNetError
 
 if TYPE_CHECKING:
@@ -97,21 +98,7 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
     show_default=True,
     help="Input layout; auto picks it from the suffix (.h5, .mat, .json).",
 )
-@click.option(
-    "--sample",
-    "-s",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default=True,
-    help="Sample index in a shard file, or in --split of a dataset directory.",
-)
-@click.option(
-    "--split",
-    default=SPLIT_DEFAULT,
-    show_default=True,
-    help="Split of a dataset directory INPUT (a shard file holds one split).",
-)
-@click.option("--variant", default="orig", show_default=True, help="Input variant stored in a shard.")
+@sample_options(STORED_SAMPLE_HELP, STORED_SPLIT_HELP)
 @click.option(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
