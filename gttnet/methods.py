@@ -11,10 +11,10 @@ Adding a method takes one decorator and one line:
 
 1. decorate the function where it lives::
 
-       @register_method("sync", requires="none", summary="clock recovery, then DLOE")
-       def reconstruct_sync(obs: Observations, *, iters: int = 10) -> Reconstruction: ...
+       @register_method("mymethod", requires="none", summary="what it does, in one line")
+       def reconstruct_mymethod(obs: Observations, *, iters: int = 10) -> Reconstruction: ...
 
-   Keyword arguments become the method's options (``reconstruct(obs, "sync", iters=5)``; recipes'
+   Keyword arguments become the method's options (``reconstruct(obs, "mymethod", iters=5)``; recipes'
    ``options:``); an unknown option is a ValueError naming the valid ones.
 2. add its module to :func:`_load_builtin_methods` as a plain ``import`` statement (the registry loads
    the built-ins on first lookup; a missing module is an ImportError, never a silent skip).
