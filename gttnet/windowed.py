@@ -40,7 +40,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -196,14 +196,7 @@ def subset_observations(obs: Observations, idx: np.ndarray) -> tuple[Observation
         rows = idx[np.argsort(obs.timestamp_s[idx], kind="stable")]
     else:
         rows = np.sort(idx)
-    n = obs.n_images
-    per_image = {}
-    for f in fields(obs):
-        value = getattr(obs, f.name)
-        if f.name != "image_size" and isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
-            per_image[f.name] = value[rows]
-    sub = replace(obs, **per_image)
-    return sub, rows
+    return obs.take(rows), rows
 
 
 def _local_rank(rec: Reconstruction, t_local: np.ndarray) -> np.ndarray:

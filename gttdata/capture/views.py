@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -12,10 +12,32 @@ from gttdata.capture.sample import affinity_from_neighbours
 from gttdata.errors import RigError, SequencingError
 from gttdata.skeleton import Skeleton
 
-__all__ = ["SEQUENCING", "Observations", "GroundTruth", "ViewableCapture", "make_view", "view_permutation"]
+__all__ = [
+    "SEQUENCING",
+    "Observations",
+    "GroundTruth",
+    "PER_IMAGE_FIELDS",
+    "ViewableCapture",
+    "make_view",
+    "view_permutation",
+]
 
 #: The three sequencing conditions of the paper.
 SEQUENCING: tuple[str, ...] = ("none", "partial", "full")
+
+
+#: The fields of :class:`Observations` with one entry per image (leading axis N).
+PER_IMAGE_FIELDS = (
+    "cam_id",
+    "K",
+    "cam_from_world",
+    "keypoints_px",
+    "visible",
+    "stream_index",
+    "timestamp_s",
+    "stream_time_s",
+    "confidence",
+)
 
 
 @dataclass(frozen=True)
@@ -87,6 +109,19 @@ class Observations:
                     f"cameras: {name}: expected finite values for every image, found NaN or inf in "
                     f"{int(bad.sum())} of {bad.shape[0]} images (first: image {i}, camera {int(self.cam_id[i])})"
                 )
+
+    def take(self, rows: np.ndarray) -> Observations:
+        """The images ``rows`` (indices or a mask over N), every per-image field indexed alike.
+
+        The sequencing condition is kept: a caller that reorders a ``partial`` or ``full`` view keeps its
+        order rules (or replaces the timing fields itself).
+        """
+        picked = {}
+        for name in PER_IMAGE_FIELDS:
+            value = getattr(self, name)
+            if value is not None:
+                picked[name] = np.asarray(value)[rows]
+        return replace(self, **picked)
 
     def weights(self) -> np.ndarray:
         """Per-observation weight, shape ``(N, J)``: the confidence where given, else 1; 0 where missing."""

@@ -250,7 +250,7 @@ def reconstruct_subjects(
     vobs = virtual_images(obs, n_subjects=n_subjects)
     shuffle = np.random.default_rng(seed).permutation(2 * n)  # hide the (n, k) layout from the method
     inv = np.argsort(shuffle)
-    vobs = _take_images(vobs, shuffle)
+    vobs = vobs.take(shuffle)
     vrec = reconstruct(vobs, method, **options)
     if vrec.affinity is None:
         raise ValueError(f"method {method!r} returns no affinity; use dloe, pseudo or gttnet")
@@ -276,17 +276,6 @@ def _centroids(X: np.ndarray, visible: np.ndarray) -> np.ndarray:
     """Mean of the observed joints of each virtual shape (all joints when none is seen), ``(N*2, 3)``."""
     w = np.where(visible.any(axis=-1, keepdims=True), visible, True).astype(np.float64)
     return ((X * w[..., None]).sum(axis=2) / w.sum(axis=2)[..., None]).reshape(-1, 3)
-
-
-def _take_images(obs: Observations, idx: np.ndarray) -> Observations:
-    return dataclasses.replace(
-        obs,
-        cam_id=obs.cam_id[idx],
-        K=obs.K[idx],
-        cam_from_world=obs.cam_from_world[idx],
-        keypoints_px=obs.keypoints_px[idx],
-        visible=obs.visible[idx],
-    )
 
 
 def score_subjects(result: MultiSubjectResult, subject: np.ndarray, points3d_gt: np.ndarray) -> dict:

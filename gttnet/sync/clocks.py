@@ -6,7 +6,7 @@ import json
 import os
 import tempfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import cast
 
@@ -282,20 +282,4 @@ def apply_clocks(
         for c in np.unique(obs.cam_id):
             sel = np.flatnonzero(obs.cam_id == c)
             si[sel[np.argsort(t[sel], kind="stable")]] = np.arange(sel.size)
-    extra = {}
-    for name in ("stream_time_s", "confidence"):  # per-image fields of newer Observations, carried along
-        if getattr(obs, name, None) is not None:
-            extra[name] = np.asarray(getattr(obs, name))[seq]
-    return Observations(
-        sequencing="full",
-        skeleton=obs.skeleton,
-        cam_id=obs.cam_id[seq],
-        K=obs.K[seq],
-        cam_from_world=obs.cam_from_world[seq],
-        keypoints_px=obs.keypoints_px[seq],
-        visible=obs.visible[seq],
-        image_size=obs.image_size,
-        stream_index=np.asarray(si)[seq],
-        timestamp_s=t[seq],
-        **extra,
-    )
+    return replace(obs.take(seq), sequencing="full", stream_index=np.asarray(si)[seq], timestamp_s=t[seq])
