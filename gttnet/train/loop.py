@@ -217,6 +217,16 @@ def _validate_and_schedule(ctx: _Context, stage: Stage, si: int, state: LoopStat
         state.lr, state.bad_vals = max(state.lr * stage.plateau_factor, stage.min_lr), 0
 
 
+def window_means(window: list[tuple[float, dict[str, float]]]) -> dict[str, float]:
+    """Mean of each loss part over the steps of a log window that have it, keyed ``loss_<part>``.
+
+    A part may be missing from some steps: the PointNet reconstruction loss only exists on batches
+    holding a named training topology (augmented topologies have no decoder).
+    """
+    names = sorted({k for _, parts in window for k in parts})
+    return {f"loss_{k}": float(np.mean([p[k] for _, p in window if k in p])) for k in names}
+
+
 def _save(ctx: _Context, optimizer, state: LoopState) -> None:
     if ctx.rank == 0:
         save_checkpoint(
@@ -320,7 +330,7 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
             if state.stage_step % recipe.train.log_every == 0 or state.stage_step in (1, total):
                 rate = seqs / max(time.perf_counter() - t_last, 1e-9)
                 # Means over the steps since the last record: single steps swing by 100x between captures.
-                mean = {f"loss_{k}": float(np.mean([p[k] for _, p in window])) for k in parts}
+                mean = window_means(window)
                 rec = {"kind": "train", "stage": stage.name, "stage_index": si, "step": state.stage_step,
                        "global_step": state.global_step, "lr": lr, "loss": float(np.mean([v for v, _ in window])),
                        "loss_last": loss, "window": len(window), **mean, "seq_per_s": rate}  # fmt: skip

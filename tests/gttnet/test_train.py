@@ -14,7 +14,7 @@ import torch
 
 from gttnet.data import EpochStream, SequenceDataset, _open_one, affinity_targets, open_source, prepare_item
 from gttnet.train.checkpoint import load_checkpoint
-from gttnet.train.loop import train
+from gttnet.train.loop import train, window_means
 from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_recipe
 from gttnet.train.stages import Stage, freeze_parts
 
@@ -353,3 +353,9 @@ def test_shard_source_generates_missing_shards_through_the_library(tmp_path):
     a, _ = src.view(0, "full", "orig")
     b, _ = recipe_src.view(0, "full", "orig")
     np.testing.assert_array_equal(a.keypoints_px, b.keypoints_px)
+
+
+def test_log_window_means_parts_missing_from_some_steps():
+    # l_P exists only on batches with a named topology; a window mixing both must still log.
+    window = [(3.0, {"affinity": 1.0, "pointnet": 0.5}), (1.0, {"affinity": 3.0})]
+    assert window_means(window) == {"loss_affinity": 2.0, "loss_pointnet": 0.5}
