@@ -339,9 +339,3 @@ def test_partial_sequencing_order_never_contradicts_a_stream(scene_factory, tiny
         along = rec.order[members[np.argsort(obs.stream_index[members])]]
         assert (np.diff(along) > 0).all()
 
-
-def test_neighbourhood_affinity_places_every_slot_and_skips_pads():
-    values = torch.tensor([[0.9, 0.2], [0.5, 0.0], [0.3, 0.7]])
-    nbr = torch.tensor([[1, 2], [0, -1], [1, 0]])
-    A = inference._neighbourhood_affinity(values, nbr)
-    np.testing.assert_allclose(A, [[0.0, 0.9, 0.2], [0.5, 0.0, 0.0], [0.7, 0.3, 0.0]])

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from gttnet.evaluate.metrics import kendall_tau
 from gttnet.geometry.ordering import (
     graph_components,
+    pose_graph_affinity,
     spectral_order,
     stream_consistent_order,
     timestamp_order,
@@ -128,3 +129,24 @@ def test_timestamp_order_is_the_rank_in_time():
     t = np.array([0.3, 0.1, 0.2, 0.1])
     assert kendall_tau(timestamp_order(t), np.array([3, 0, 2, 1])) == 1.0
     np.testing.assert_array_equal(timestamp_order(t), [3, 0, 2, 1])
+
+
+def test_pose_graph_order_recovers_a_shuffled_smooth_motion():
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 2.0, 120)
+    # 5 joints moving smoothly and without revisiting a pose; noise well below the step between frames
+    X = np.stack([np.cos(t + p) + p for p in range(5)], axis=0).T[..., None] * np.array([1.0, 0.5, 0.2])
+    X = X + t[:, None, None] * np.array([0.3, 0.0, 0.1]) + rng.normal(scale=1e-4, size=X.shape)
+    perm = rng.permutation(len(t))
+    rank = spectral_order(pose_graph_affinity(X[perm], k=8))
+    assert kendall_tau(rank, perm) > 0.99  # image i of the shuffled set is frame perm[i]
+
+
+def test_pose_graph_affinity_links_k_per_image_and_refuses_nan():
+    X = np.random.default_rng(0).normal(size=(30, 4, 3))
+    A = pose_graph_affinity(X, k=5)
+    assert A.shape == (30, 30) and np.all(np.diag(A) == 0)
+    assert np.all((A > 0).sum(axis=1) == 5) and np.all(A <= 1.0)
+    X[3, 1, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        pose_graph_affinity(X, k=5)
