@@ -338,4 +338,3 @@ def test_partial_sequencing_order_never_contradicts_a_stream(scene_factory, tiny
         members = np.flatnonzero(obs.cam_id == c)
         along = rec.order[members[np.argsort(obs.stream_index[members])]]
         assert (np.diff(along) > 0).all()
-
