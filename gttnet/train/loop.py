@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import math
 import os
@@ -33,7 +34,7 @@ from gttnet.train.checkpoint import (
     set_rng_states,
 )
 from gttnet.train.objective import StepObjective
-from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
+from gttnet.train.recipe import TrainRecipe, recipe_to_dict, run_folder, saved_run_recipe
 from gttnet.train.rundir import open_run
 from gttnet.train.runlog import RunLog, git_sha, plot_loss_curve
 from gttnet.train.stages import Stage, freeze_parts
@@ -53,7 +54,7 @@ class RunResult:
         run_dir: The run directory.
         state: Final loop state (history included).
         model: The trained network.
-        finished: False when stopped early by ``max_steps`` (resume with ``resume=run_dir``).
+        finished: False when stopped early by ``max_steps`` (continue with ``out=run_dir, resume=True``).
     """
 
     run_dir: Path
@@ -74,11 +75,6 @@ def _lr(stage: Stage, state: LoopState, total: int) -> float:
         t = min(state.stage_step / max(total, 1), 1.0)
         return stage.min_lr + (stage.lr - stage.min_lr) * 0.5 * (1.0 + math.cos(math.pi * t))
     return state.lr
-
-
-def _run_dir(recipe: TrainRecipe, out: str | Path | None, world: int) -> Path:
-    default = Path(recipe.out_dir) / f"{recipe.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    return distributed.agree_on_path(out if out else default, world)
 
 
 @dataclass
@@ -107,7 +103,7 @@ def _prepare(
     if dev.type == "cpu":
         limit_cpu_threads(recipe.train.threads)
     dtype = torch.float64 if recipe.train.dtype == "float64" else torch.float32
-    run_dir = _run_dir(recipe, out, world)
+    run_dir = distributed.agree_on_path(out, world)
     if rank == 0:
         run_dir.mkdir(parents=True, exist_ok=True)
         if payload is None:
@@ -251,7 +247,7 @@ def train(
     *,
     out: str | Path | None = None,
     device: str | None = None,
-    resume: bool | str | Path | None = None,
+    resume: bool = False,
     overwrite: bool = False,
     max_steps: int | None = None,
     progress: bool = True,
@@ -263,12 +259,13 @@ def train(
     checkpoint holding all state is written every ``checkpoint_every`` steps and at every stage's end.
 
     Args:
-        recipe: The recipe; omitted when resuming (the run's resolved recipe is used).
-        out: Run directory (default ``recipe.out_dir/<name>-<time>``). One that already holds a run
-            is refused unless ``resume`` or ``overwrite`` is given; one process writes it at a time.
+        recipe: The recipe; None to resume the run in ``out`` with the recipe it saved.
+        out: Run directory (default: the recipe's ``output_dir``, else ``runs/<name>``). One that already
+            holds a run is refused unless ``resume`` or ``overwrite`` is given; one process writes it at a
+            time.
         device: Overrides ``recipe.train.device`` (``auto``, ``cpu``, ``cuda``).
-        resume: True: continue the run in ``out`` exactly where it stopped (same recipe only; a
-            directory without a checkpoint starts afresh). A run directory: continue that run.
+        resume: Continue the run in ``out`` exactly where it stopped (same recipe only, ``output_dir``
+            aside; a directory without a checkpoint starts afresh).
         overwrite: Delete an earlier run in ``out`` first.
         max_steps: Stop (with a checkpoint) after this many steps in this call; None: run to the end.
         progress: Show a tqdm progress bar.
@@ -276,23 +273,21 @@ def train(
     Returns:
         :class:`RunResult`.
     """
+    if recipe is None and (out is None or not resume):
+        raise ValueError("train() needs a recipe, or out=RUN_DIR with resume=True to continue that run")
+    folder = Path(out) if out is not None else run_folder(recipe)  # type: ignore[arg-type]
     rank0 = int(os.environ.get("RANK", "0")) == 0
-    folder = (
-        out if out is not None else (resume if resume is not None and not isinstance(resume, bool) else None)
-    )
     # The lock comes first: a second trainer must not inspect or delete (--overwrite) a run in progress.
-    with OutputLock(folder, "gttnet train") if rank0 and folder is not None else contextlib.nullcontext():
+    with OutputLock(folder, "gttnet train") if rank0 else contextlib.nullcontext():
         if rank0:
-            recipe, payload, out = open_run(recipe, out=out, resume=resume, overwrite=overwrite)
-        elif resume is not None and not isinstance(resume, bool):
-            payload = load_checkpoint(resume)
-            recipe, out = parse_train_recipe(payload["recipe"]), resume
+            recipe, payload = open_run(recipe, out=folder, resume=resume, overwrite=overwrite)
+        elif recipe is None:
+            payload = load_checkpoint(folder)
+            recipe = saved_run_recipe(payload["recipe"], folder)
         else:
-            ck = Path(out) / CHECKPOINT_NAME if out is not None and resume else None
-            payload = load_checkpoint(ck.parent) if ck is not None and ck.is_file() else None
-        if recipe is None:
-            raise ValueError("train() needs a recipe or a run directory to resume")
-        return _train(recipe, payload, out, device, max_steps, progress)
+            recipe = dataclasses.replace(recipe, output_dir=str(folder))
+            payload = load_checkpoint(folder) if resume and (folder / CHECKPOINT_NAME).is_file() else None
+        return _train(recipe, payload, folder, device, max_steps, progress)
 
 
 def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, progress) -> RunResult:

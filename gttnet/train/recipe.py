@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,8 @@ __all__ = [
     "load_train_recipe",
     "parse_train_recipe",
     "recipe_to_dict",
+    "run_folder",
+    "saved_run_recipe",
 ]
 
 
@@ -140,7 +143,10 @@ class TrainRecipe:
     Args:
         name: Recipe name (run directory prefix).
         seed: Seed of the model initialisation, data order, sequencing draws and rotations.
-        out_dir: Parent directory of run directories.
+        output_dir: The run folder itself (checkpoint, log, model); None: ``runs/<name>``. ``--out``
+            overrides it. Where a run lives is no part of its identity: ``--resume`` ignores this key
+            when it compares recipes. Older recipes named it ``out_dir`` (then the parent of
+            timestamped run folders); they still load, with a warning, as ``output_dir: <out_dir>/<name>``.
         model: :class:`ModelSpec`.
         data: :class:`DataSpec`.
         train: :class:`TrainSpec`.
@@ -150,7 +156,7 @@ class TrainRecipe:
     name: str
     stages: list[Stage]
     seed: int = 0
-    out_dir: str = "runs"
+    output_dir: str | None = None
     model: ModelSpec = field(default_factory=ModelSpec)
     data: DataSpec = field(default_factory=DataSpec)
     train: TrainSpec = field(default_factory=TrainSpec)
@@ -199,11 +205,50 @@ def parse_train_recipe(data: dict, overrides: Sequence[str] = (), source: str = 
         source: The recipe file, first word of every message ("" for none).
 
     Raises:
-        RecipeError: On an unknown key, a wrong type or an invalid value (one line naming the key).
+        RecipeError: On an unknown key, a wrong type or an invalid value (one line naming the key), or
+            both ``out_dir`` and ``output_dir`` in ``data``.
+
+    Warns:
+        FutureWarning: ``data`` uses the old key ``out_dir`` (one line naming ``source`` and the key).
     """
     data = yaml.safe_load(yaml.safe_dump(data)) or {}
+    _rename_out_dir(data, source or "train recipe")
     apply_overrides(data, overrides, source or "train recipe")
     return build_dataclass(TrainRecipe, data, "", source)
+
+
+def _rename_out_dir(data: dict, source: str) -> None:
+    """Read the old key ``out_dir: P`` (parent of run folders) as ``output_dir: P/<name>``, with a warning."""
+    if "out_dir" not in data:
+        return
+    if "output_dir" in data:
+        raise RecipeError(
+            f"{source}: out_dir and output_dir: expected one of them (out_dir is the old name), found both"
+        )
+    parent = data.pop("out_dir")
+    if not isinstance(parent, str):
+        raise RecipeError(f"{source}: out_dir: expected a folder path, found {parent!r}")
+    data["output_dir"] = str(Path(parent) / str(data.get("name", "run")))
+    warnings.warn(
+        f"{source}: out_dir is deprecated, rename it output_dir (the run folder itself); "
+        f"reading out_dir: {parent} as output_dir: {data['output_dir']}",
+        FutureWarning,
+        stacklevel=3,
+    )
+
+
+def run_folder(recipe: TrainRecipe) -> Path:
+    """The run folder of ``recipe``: its ``output_dir``, or ``runs/<name>`` when it names none."""
+    return Path(recipe.output_dir) if recipe.output_dir else Path("runs") / recipe.name
+
+
+def saved_run_recipe(data: dict, run_dir: str | Path) -> TrainRecipe:
+    """The recipe a run saved (checkpoint or ``recipe.yaml``), placed in ``run_dir`` where it now lives.
+
+    Saved recipes are no user's file: an older run's ``out_dir`` key is dropped without a warning.
+    """
+    data = {k: v for k, v in data.items() if k not in ("out_dir", "output_dir")}
+    return parse_train_recipe({**data, "output_dir": str(run_dir)}, source=f"{run_dir}: saved recipe")
 
 
 def load_train_recipe(path: str | Path, overrides: Sequence[str] = ()) -> TrainRecipe:

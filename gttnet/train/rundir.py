@@ -10,12 +10,13 @@ The convention is the CLI's (``--resume`` / ``--overwrite``):
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from gttdata.errors import OutputError
 from gttdata.fileio import check_output, remove_output
 from gttnet.train.checkpoint import CHECKPOINT_NAME, load_checkpoint
-from gttnet.train.recipe import TrainRecipe, parse_train_recipe, recipe_to_dict
+from gttnet.train.recipe import TrainRecipe, recipe_to_dict, saved_run_recipe
 
 __all__ = ["RUN_FILES", "holds_run", "open_run"]
 
@@ -49,63 +50,62 @@ def _first_difference(a: object, b: object, where: str = "") -> str:
     return f"{where or 'recipe'}: this recipe has {b!r}, the run has {a!r}"
 
 
+def _identity(recipe: TrainRecipe) -> dict:
+    """What makes two runs the same run: the whole recipe except where it lives (``output_dir``)."""
+    return {k: v for k, v in recipe_to_dict(recipe).items() if k != "output_dir"}
+
+
 def open_run(
     recipe: TrainRecipe | None,
     *,
-    out: str | Path | None,
-    resume: bool | str | Path | None = None,
+    out: str | Path,
+    resume: bool = False,
     overwrite: bool = False,
-) -> tuple[TrainRecipe, dict | None, Path | None]:
+) -> tuple[TrainRecipe, dict | None]:
     """Decide what a training call does with its run directory.
 
     Args:
-        recipe: The recipe, or None to resume a run directory with its saved recipe.
-        out: The run directory (None: a new timestamped one, decided later).
-        resume: True: continue the run in ``out`` when there is one. A path: continue that run
-            directory (``out`` must be None or the same).
+        recipe: The recipe, or None to resume the run in ``out`` with its saved recipe.
+        out: The run directory.
+        resume: Continue the run in ``out`` when there is one (only a run of the same recipe).
         overwrite: Delete an earlier run in ``out`` first.
 
     Returns:
-        ``(recipe, checkpoint payload or None, run directory or None)``.
+        ``(recipe, checkpoint payload or None)``; the recipe's ``output_dir`` is ``out``.
 
     Raises:
         OutputError: ``out`` holds a run and neither flag is given, or holds a run of another recipe.
-        FileNotFoundError: A resume path without a checkpoint.
+        FileNotFoundError: ``recipe`` is None and ``out`` holds no checkpoint to resume from.
     """
-    if resume is not None and not isinstance(resume, bool):
-        if out is not None and Path(out) != Path(resume):
-            raise OutputError(f"--resume {resume} and --out {out}: give one run directory")
-        out = Path(resume)
-        if recipe is None:
-            saved_run = load_checkpoint(out)
-            return parse_train_recipe(saved_run["recipe"]), saved_run, out
-        resume = True
-    if recipe is None:
-        raise ValueError("train() needs a recipe or a run directory to resume")
-    if out is None:
-        return recipe, None, None
     run_dir = Path(out)
+    if recipe is None:
+        if not resume:
+            raise ValueError("train() needs a recipe, or resume=True to continue the run in out")
+        saved_run = load_checkpoint(run_dir)
+        return saved_run_recipe(saved_run["recipe"], run_dir), saved_run
+    recipe = dataclasses.replace(recipe, output_dir=str(run_dir))
     check_output(
         run_dir, exists=holds_run(run_dir), resume=bool(resume), overwrite=overwrite, what="a training run"
     )
     if overwrite:
         remove_output([run_dir / name for name in RUN_FILES])
-        return recipe, None, run_dir
+        return recipe, None
     payload: dict | None = None
     if resume and (run_dir / CHECKPOINT_NAME).is_file():
         payload = load_checkpoint(run_dir)
-        saved = recipe_to_dict(parse_train_recipe(payload["recipe"]))
+        saved = _identity(saved_run_recipe(payload["recipe"], run_dir))
     elif resume and (run_dir / "recipe.yaml").is_file():
         import yaml
 
-        saved = recipe_to_dict(parse_train_recipe(yaml.safe_load((run_dir / "recipe.yaml").read_text())))
+        saved = _identity(saved_run_recipe(yaml.safe_load((run_dir / "recipe.yaml").read_text()), run_dir))
     else:
         saved = None
-    if saved is not None and saved != recipe_to_dict(recipe):
+    if saved is not None and saved != _identity(recipe):
         raise OutputError(
-            f"{run_dir}: holds a run of another recipe ({_first_difference(saved, recipe_to_dict(recipe))}); "
-            "resume it with its own recipe (gttnet train --resume RUN_DIR), or use another --out or --overwrite"
+            f"{run_dir}: holds a run of another recipe ({_first_difference(saved, _identity(recipe))}); "
+            f"resume it with its own recipe (gttnet train --out {run_dir} --resume), or use another --out "
+            "or --overwrite"
         )
     if resume and payload is None:  # started but never checkpointed: nothing to keep
         remove_output([run_dir / name for name in RUN_FILES])
-    return recipe, payload, run_dir
+    return recipe, payload

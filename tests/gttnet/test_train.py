@@ -30,7 +30,7 @@ def _recipe(tmp_path: Path, *, stages=None, **overrides) -> dict:
     data = {
         "name": "test",
         "seed": 0,
-        "out_dir": str(tmp_path),
+        "output_dir": str(tmp_path / "run"),
         "model": {"builder": "gttnet_tiny", "settings": {"widths": [4, 4], "hidden": 4, "k": 6}},
         "data": {
             "sources": [{"generate": str(REPO / "recipes/gttdata/tiny.yaml"), "max_train": 2, "max_val": 1}],
@@ -102,6 +102,23 @@ def test_recipe_errors_are_one_line(tmp_path):
         parse_train_recipe(base, ["stages"])
     r = parse_train_recipe(base, ["stages.1.steps=5", "model.settings.top_q=1", "train.amp=true"])
     assert r.stages[1].steps == 5 and r.model.settings["top_q"] == 1 and r.train.amp is True
+
+
+def test_old_out_dir_key_loads_with_one_warning(tmp_path):
+    """``out_dir: P`` (parent of run folders) still loads, as ``output_dir: P/<name>``; both keys are refused."""
+    import yaml
+
+    data = _recipe(tmp_path)
+    del data["output_dir"]
+    path = tmp_path / "old.yaml"
+    path.write_text(yaml.safe_dump({**data, "out_dir": "runs"}))
+    with pytest.warns(FutureWarning) as caught:
+        r = load_train_recipe(path)
+    assert r.output_dir == str(Path("runs") / "test")
+    assert len(caught) == 1 and str(path) in str(caught[0].message) and "out_dir" in str(caught[0].message)
+    path.write_text(yaml.safe_dump({**data, "out_dir": "runs", "output_dir": "runs/x"}))
+    with pytest.raises(RecipeError, match=rf"^{path}: out_dir and output_dir: .*found both"):
+        load_train_recipe(path)
 
 
 def test_stage_validation():
@@ -241,7 +258,7 @@ def test_resume_mid_cascade_is_bit_exact(tmp_path):
     assert not part.finished
     ck = load_checkpoint(tmp_path / "part")
     assert (ck["state"].stage_index, ck["state"].stage_step) == (1, 1)
-    resumed = train(resume=tmp_path / "part", progress=False)
+    resumed = train(out=tmp_path / "part", resume=True, progress=False)  # the recipe the run saved
     assert resumed.finished
     wf, wr = _weights(full.model), _weights(resumed.model)
     assert all(torch.equal(wf[k], wr[k]) for k in wf)

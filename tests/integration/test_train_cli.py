@@ -34,8 +34,9 @@ def test_train_tiny_then_resume_is_a_no_op(tmp_path, in_repo):
     assert {"loss_structure", "loss_affinity", "loss_autoencoding"} <= set(train[-1])
     for f in ("model.pt", "model.json", "loss_curve.png", "checkpoint.pt", "recipe.yaml"):
         assert (run / f).is_file(), f
-    again = CliRunner().invoke(main, ["train", "--resume", str(run), "--quiet"])
+    again = CliRunner().invoke(main, ["train", "--out", str(run), "--resume", "--quiet"])
     assert again.exit_code == 0, again.output
+    assert "warning" not in again.output  # the saved recipe names output_dir, not the old out_dir
 
 
 def test_train_stop_and_resume(tmp_path, in_repo):
@@ -43,8 +44,21 @@ def test_train_stop_and_resume(tmp_path, in_repo):
     res = CliRunner().invoke(main, ["train", TINY, "--out", str(run), "--max-steps", "2", "--quiet"])
     assert res.exit_code == 0, res.output
     assert "stopped at step 2" in res.output
+    assert f"gttnet train --out {run} --resume" in res.output  # the line says how to continue
+    res = CliRunner().invoke(main, ["train", TINY, "--out", str(run), "--resume", "--quiet"])
+    assert res.exit_code == 0 and "finished" in res.output, res.output
+
+
+def test_old_resume_folder_form_still_works_with_a_warning(tmp_path, in_repo):
+    """``--resume RUN_DIR`` (before --resume became a flag) is read as ``--out RUN_DIR --resume``."""
+    run = tmp_path / "run"
+    res = CliRunner().invoke(main, ["train", TINY, "--out", str(run), "--max-steps", "5", "--quiet"])
+    assert res.exit_code == 0 and "stopped at step 5" in res.output, res.output
     res = CliRunner().invoke(main, ["train", "--resume", str(run), "--quiet"])
     assert res.exit_code == 0 and "finished" in res.output, res.output
+    assert f"warning: gttnet train --resume {run} is deprecated; use: gttnet train --out {run} --resume" in (
+        res.output
+    )
 
 
 @pytest.mark.parametrize(
@@ -54,6 +68,12 @@ def test_train_stop_and_resume(tmp_path, in_repo):
         (["train", TINY, "stages.0.steps=zero"], "stages.0.steps: expected an integer"),
         (["train", TINY, "model.builder=gttnet_huge"], "unknown model builder"),
         (["train", "--resume", "/nonexistent/run"], "no checkpoint to resume from"),
+        (["train", "--out", "/nonexistent/run", "--resume"], "no checkpoint to resume from"),
+        (
+            ["train", TINY, "--resume", "/some/run"],
+            "--resume takes no folder, use: gttnet train [RECIPE] --out",
+        ),
+        (["train", "/some/run"], "expected a recipe file (.yaml); to continue a run: gttnet train"),
         (["train"], "give a RECIPE"),
     ],
 )

@@ -81,7 +81,7 @@ def test_damaged_checkpoint_never_resumes(run_dir, damage):
         path.write_bytes(b"\x80\x04garbage that is not a pickle" * 10)
     with pytest.raises(ModelError, match=r"checkpoint.pt: .*expected"):
         load_checkpoint(run_dir)
-    line = one_line_error(CliRunner().invoke(main, ["train", "--resume", str(run_dir)]))
+    line = one_line_error(CliRunner().invoke(main, ["train", "--out", str(run_dir), "--resume"]))
     assert "checkpoint.pt" in line and "expected" in line
 
 
