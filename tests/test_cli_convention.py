@@ -3,8 +3,8 @@
 Walks every (sub)command of ``gttdata`` and ``gttnet`` and checks its ``--help`` and options: an
 ``Examples:`` block of runnable-looking command lines, ``--out`` for output (never ``--dest``/``--output``),
 ``--progress`` with ``--quiet``, ``--resume`` with ``--overwrite``, ``--split`` (default ``test``) with
-``--sample``, ``--method`` as a checked choice of registered methods, ``--json`` as a plain flag, and no
-``--units`` that defaults to inches on an input.
+``--sample``, ``--method`` as a checked choice of registered methods, ``--json`` as a plain flag, and
+every ``--units`` defaulting to metres (or to "not given": the file's own unit, else metres with a warning).
 """
 
 from __future__ import annotations
@@ -18,8 +18,6 @@ from click.testing import CliRunner
 from gttdata.cli import main as gttdata_main
 from gttnet.cli import main as gttnet_main
 
-#: Writers whose --units names the unit of a file they write (not a guess about a file they read).
-UNITS_OF_WRITTEN_FILE = {"gttnet export-json"}
 #: Commands that run long enough for a progress bar: they take --progress/--no-progress and --quiet.
 LONG = {"gttdata generate", "gttdata preview", "gttnet evaluate", "gttnet train", "gttnet reconstruct"}
 
@@ -98,7 +96,7 @@ def test_options_follow_the_convention(path):
         assert set(t.choices) <= set(available_methods()), (path, t.choices)
     if "--json" in opts:
         assert opts["--json"].is_flag, path
-    if "--units" in opts and path not in UNITS_OF_WRITTEN_FILE:
+    if "--units" in opts:  # readers and writers alike: metres unless told (docs/CLI.md, "Units")
         assert opts["--units"].default in (None, "m"), (
             f"{path}: --units defaults to {opts['--units'].default!r}"
         )

@@ -18,9 +18,10 @@ __all__ = ["export_json_cmd", "register"]
 @click.option(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
-    default="inch",
+    default="m",
     show_default=True,
-    help="Length unit of C, point3D and X_init in the file (the authors' files use inches).",
+    help="Length unit of C, point3D and X_init in the file, recorded in its 'units' key "
+    "(the authors' own files are in inches: --units inch).",
 )
 @click.option(
     "--out", "out_path", type=click.Path(dir_okay=False), required=True, help="The .json file to write."
@@ -59,7 +60,8 @@ def export_json_cmd(input_path, sample, split, variant, units, out_path, overwri
         click.echo(json.dumps(summary))
     else:
         click.echo(
-            f"{path}: {capture.n_images} images, {capture.n_joints} joints ({capture.skeleton.name}), {units}"
+            f"{path}: {capture.n_images} images, {capture.n_joints} joints ({capture.skeleton.name}), "
+            f"lengths in {units}"
         )
 
 

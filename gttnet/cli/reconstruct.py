@@ -361,8 +361,8 @@ def _resolve_input(
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
     default=None,
-    help="Length unit of a .mat/.json input, converted to metres; those files record none, so without "
-    "--units inch is assumed with a warning (shards are metres).",
+    help="Length unit of a .mat/.json input, converted to metres [default: the unit the file records "
+    "(our .json files do), else m with a warning; the authors' files are in inches]. Shards are metres.",
 )
 @click.option(
     "--out",

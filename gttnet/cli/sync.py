@@ -103,8 +103,8 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
     "--units",
     type=click.Choice(["m", "mm", "cm", "inch"]),
     default=None,
-    help="Length unit of a .mat/.json input; those files record none, so without --units inch is "
-    "assumed with a warning (shards are metres).",
+    help="Length unit of a .mat/.json input [default: the unit the file records (our .json files do), "
+    "else m with a warning; the authors' files are in inches]. Shards are metres.",
 )
 @click.option(
     "--fps",

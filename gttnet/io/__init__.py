@@ -7,7 +7,6 @@ sequencing condition (``Observations``) plus the ground truth when the file hold
 from __future__ import annotations
 
 import logging
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,9 +27,6 @@ FORMATS: dict[str, tuple[str, ...]] = {
     "dloe-mat": (".mat",),
     "gttnet-json": (".json",),
 }
-
-#: Length unit each foreign format is read in when none is given (the reference data use inches).
-_DEFAULT_UNITS = {"h5": "m", "dloe-mat": "inch", "gttnet-json": "inch"}
 
 
 @dataclass(frozen=True)
@@ -72,7 +68,7 @@ def detect_format(path: str | Path) -> str:
     )
 
 
-def _read_foreign(path: Path, fmt: str, units: str) -> ImportedCapture:
+def _read_foreign(path: Path, fmt: str, units: str | None) -> ImportedCapture:
     if fmt == "dloe-mat":
         from gttnet.io.dloe_mat import read_dloe_mat
 
@@ -102,9 +98,9 @@ def load_input(
             (``full`` for shards and files with a global order, else ``partial``).
         sample: Sample index inside a shard file, or inside ``split`` of a dataset directory (h5 only).
         variant: Input variant inside a shard (h5 only).
-        units: Length unit of a foreign file (key of :data:`UNITS`); None: inches for the DLOE and
-            GTT-Net layouts (their reference data), with a ``UserWarning`` saying so, since those files do
-            not record their unit. Shards are always metres.
+        units: Length unit of a foreign file (key of :data:`UNITS`); None: the unit the file records
+            (our GTT-Net JSON files do), else metres with a ``UserWarning`` saying so (the authors' files
+            record none; theirs are in inches). Shards are always metres.
         seed: Seed of the random image permutation under ``none``.
         split: Split of a dataset directory (None: the sample index runs over all splits in manifest
             order); a shard file holds one split and ignores it.
@@ -122,20 +118,13 @@ def load_input(
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; expected auto or one of {', '.join(FORMATS)}")
-    if units is None and _DEFAULT_UNITS[fmt] != "m":
-        warnings.warn(
-            f"{path}: the {fmt} layout records no length unit; assuming {_DEFAULT_UNITS[fmt]} (its reference "
-            "data's unit); pass --units m|mm|cm|inch to set it",
-            UserWarning,
-            stacklevel=2,
-        )
-    units = _DEFAULT_UNITS[fmt] if units is None else units
-    if units not in UNITS:
+    if units is not None and units not in UNITS:
         raise ValueError(f"unknown units {units!r}; expected one of {', '.join(UNITS)}")
     cap: CaptureSample | ImportedCapture
     if fmt == "h5":
-        if units != "m":
+        if units not in (None, "m"):
             raise ValueError(f"{path}: shards are stored in metres; --units {units} does not apply")
+        units = "m"
         from gttnet.io.shards import read_shard_sample
 
         if path.is_dir() and split is not None:
@@ -152,6 +141,7 @@ def load_input(
         sequencing = sequencing or "full"
     else:
         cap = _read_foreign(path, fmt, units)
+        units = cap.file_units
         sequencing = sequencing or cap.best_sequencing
     obs, gt = make_view(cap, sequencing, seed=seed)
     index = view_permutation(cap, sequencing, seed)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,10 +11,48 @@ import numpy as np
 from gttdata.capture.sample import temporal_affinity
 from gttdata.skeleton import Skeleton
 
-__all__ = ["UNITS", "ImportedCapture"]
+__all__ = ["UNITS", "ImportedCapture", "resolve_units"]
 
 #: Length units accepted by the importers, in metres.
 UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "inch": 0.0254}
+
+
+def resolve_units(path: object, layout: str, given: str | None, recorded: str | None = None) -> str:
+    """The length unit of a foreign file: what it records, else ``given``, else metres with a warning.
+
+    Args:
+        path: The file (named in messages).
+        layout: Its layout's name (``gttnet-json``, ``dloe-mat``), for the warning.
+        given: The caller's ``--units`` (None: not given).
+        recorded: The unit the file records (None: it records none; the authors' files never do).
+
+    Returns:
+        A key of :data:`UNITS`.
+
+    Raises:
+        ValueError: ``given`` or ``recorded`` is no key of :data:`UNITS`, or the two disagree.
+
+    Warns:
+        UserWarning: Neither is known, so metres are assumed (one line naming the file and the way out).
+    """
+    for what, unit in (("--units", given), ("the file's units", recorded)):
+        if unit is not None and unit not in UNITS:
+            raise ValueError(f"{path}: {what}: expected one of {', '.join(UNITS)}, found {unit!r}")
+    if recorded is not None:
+        if given is not None and given != recorded:
+            raise ValueError(
+                f"{path}: the file records units {recorded!r}, --units says {given!r}; drop --units"
+            )
+        return recorded
+    if given is None:
+        warnings.warn(
+            f"{path}: the {layout} layout records no length unit; assuming m; the authors' own files are in "
+            "inches: pass --units inch (or m|mm|cm) to set it",
+            UserWarning,
+            stacklevel=3,
+        )
+        return "m"
+    return given
 
 
 @dataclass(frozen=True)
@@ -36,6 +75,7 @@ class ImportedCapture:
         image_size: ``(width, height)`` per camera, shape ``(V, 2)``.
         time_rank: Rank of each image in true time, shape ``(N,)``, or None when the file has no order.
         points3d: Ground-truth joints, metres, shape ``(N, J, 3)``, or None.
+        file_units: The length unit the file was read in (converted to metres on import).
     """
 
     source: str
@@ -49,6 +89,7 @@ class ImportedCapture:
     image_size: np.ndarray
     time_rank: np.ndarray | None = None
     points3d: np.ndarray | None = None
+    file_units: str = "m"
 
     @property
     def n_images(self) -> int:

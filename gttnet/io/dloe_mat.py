@@ -10,7 +10,7 @@ import scipy.io
 
 from gttdata.skeleton import default_skeleton
 from gttnet.errors import ImportFormatError
-from gttnet.io._views import UNITS, ImportedCapture
+from gttnet.io._views import UNITS, ImportedCapture, resolve_units
 
 __all__ = ["read_dloe_mat"]
 
@@ -88,7 +88,7 @@ def _cameras(path: Path, cam_index: np.ndarray, n: int) -> tuple[np.ndarray, np.
     return cam, stream
 
 
-def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
+def read_dloe_mat(path: str | Path, *, units: str | None = None) -> ImportedCapture:
     """Read a DLOE demo ``.mat`` file.
 
     Layout (docs/FORMAT.md, "DLOE MATLAB layout"): a struct ``caminput`` with ``x`` (N x 1 cell of 3 x P homogeneous pixel
@@ -103,7 +103,8 @@ def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
 
     Args:
         path: The ``.mat`` file.
-        units: Length unit of the file (key of :data:`gttnet.io._views.UNITS`).
+        units: Length unit of the file (key of :data:`gttnet.io._views.UNITS`); the layout records none
+            (the demos are in inches), so None assumes metres with a warning.
 
     Returns:
         The capture in file order.
@@ -112,6 +113,7 @@ def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
         ImportFormatError: Naming the file, the field, what was expected and what was found.
     """
     path = Path(path)
+    units = resolve_units(path, "dloe-mat", units)
     scale = UNITS[units]
     mat = _load(path)
     if "caminput" not in mat:
@@ -170,4 +172,5 @@ def read_dloe_mat(path: str | Path, *, units: str = "inch") -> ImportedCapture:
         image_size=image_size,
         time_rank=rank,
         points3d=X,
+        file_units=units,
     )

@@ -17,7 +17,7 @@ import numpy as np
 
 from gttdata.skeleton import Skeleton, default_skeleton
 from gttnet.errors import ImportFormatError
-from gttnet.io._views import UNITS, ImportedCapture
+from gttnet.io._views import UNITS, ImportedCapture, resolve_units
 
 __all__ = ["RAY_FOCAL_PX", "read_gttnet_json", "rays_to_pixels", "skeleton_from_limbs", "write_gttnet_json"]
 
@@ -227,7 +227,15 @@ def _time_rank(path: Path, d: dict, n: int) -> np.ndarray:
     return rank
 
 
-def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCapture:
+def _units(path: Path, d: dict, given: str | None) -> str:
+    """The file's ``units`` key, else ``given``, else metres with a warning."""
+    try:
+        return resolve_units(path, "gttnet-json", given, d.get("units"))
+    except ValueError as exc:
+        raise ImportFormatError(str(exc)) from exc
+
+
+def read_gttnet_json(path: str | Path, *, units: str | None = None) -> ImportedCapture:
     """Read a GTT-Net JSON file (ours or the authors' variant).
 
     Layout: ``ray`` (3P x N unit world rays, joint-major rows; an all-zero ray is a missing joint)
@@ -239,12 +247,14 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
     (3P x N ground truth), ``t`` (N capture times; the true order, otherwise the file order),
     ``limbSeq`` (the skeleton: L limbs as joint index pairs, see :func:`skeleton_from_limbs`).
     ``X_init``, ``rayDInd`` and ``A_GT`` are accepted and ignored: every method computes its own
-    initial structure and neighbours from the rays. Rays become pixels through ``K`` and a synthetic
+    initial structure and neighbours from the rays. ``units`` (ours, optional): the length unit of
+    ``C`` and ``point3D``; the authors' files record none (theirs are in inches). Rays become pixels through ``K`` and a synthetic
     rotation per camera (:func:`rays_to_pixels`), so ``Observations.rays()`` returns the stored rays.
 
     Args:
         path: The ``.json`` file.
-        units: Length unit of ``C`` and ``point3D`` (key of :data:`gttnet.io._views.UNITS`).
+        units: Length unit of ``C`` and ``point3D`` (key of :data:`gttnet.io._views.UNITS`); None: the
+            file's ``units`` key, else metres with a warning (:func:`~gttnet.io._views.resolve_units`).
 
     Returns:
         The capture in time order, with its time rank and (when stored) ground truth.
@@ -253,7 +263,6 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
         ImportFormatError: Naming the file, the field, what was expected and what was found.
     """
     path = Path(path)
-    scale = UNITS[units]
     try:
         d = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
@@ -264,6 +273,8 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
         raise ImportFormatError(f"{path}: expected UTF-8 JSON text, found binary data") from exc
     if not isinstance(d, dict):
         raise ImportFormatError(f"{path}: expected a JSON object, found {type(d).__name__}")
+    units = _units(path, d, units)
+    scale = UNITS[units]
     ray = _array(path, d, "ray", 2)
     if ray.shape[0] % 3 or ray.shape[0] == 0 or ray.shape[1] == 0:
         raise ImportFormatError(
@@ -336,6 +347,7 @@ def read_gttnet_json(path: str | Path, *, units: str = "inch") -> ImportedCaptur
         image_size=size,
         time_rank=rank,
         points3d=None if X is None else X.reshape(p, 3, n).transpose(2, 0, 1) * scale,
+        file_units=units,
     )
 
 
@@ -343,7 +355,7 @@ def write_gttnet_json(
     sample,
     path: str | Path,
     *,
-    units: str = "inch",
+    units: str = "m",
     n_ranked: int = 20,
     overwrite: bool = False,
 ) -> Path:
@@ -351,13 +363,14 @@ def write_gttnet_json(
 
     Images are written in true time order with ``camID`` (1-based), ``t`` (seconds), ``C``, ``ray``,
     ``point3D`` (the ground truth), ``limbSeq`` (1-based limb pairs), ``X_init`` and ``rayDInd``
-    (pseudo-triangulation's initial structure and its ``n_ranked`` best neighbours per image, 1-based).
+    (pseudo-triangulation's initial structure and its ``n_ranked`` best neighbours per image, 1-based),
+    and ``units``, the length unit (a key the authors' files lack and their code ignores).
     :func:`read_gttnet_json` reads it back to the same rays, centres, order and ground truth.
 
     Args:
         sample: A :class:`gttdata.capture.sample.CaptureSample` (true time order, ground truth).
         path: Output ``.json``; written to a temporary name, then renamed.
-        units: Length unit of ``C``, ``point3D`` and ``X_init`` (key of ``UNITS``).
+        units: Length unit of ``C``, ``point3D`` and ``X_init`` (key of ``UNITS``), recorded in the file.
         n_ranked: Neighbours per image in ``rayDInd``.
         overwrite: Replace an existing file.
 
@@ -393,6 +406,7 @@ def write_gttnet_json(
         "limbSeq": limbs.tolist(),
         "X_init": joint_major(pt.X_init / scale),
         "rayDInd": (pt.order[:, : min(n_ranked, n)] + 1).tolist(),
+        "units": units,
     }
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(d))

@@ -144,11 +144,14 @@ def test_cli_export_json_then_reconstruct(tmp_path):
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
     info = json.loads(res.output.strip().splitlines()[-1])
-    assert info["n_joints"] == json.loads(out.read_text())["ray"].__len__() // 3
+    written = json.loads(out.read_text())
+    assert info["n_joints"] == len(written["ray"]) // 3
+    assert info["units"] == written["units"] == "m"  # metres unless --units says otherwise, and recorded
     again = CliRunner().invoke(main, args)
     assert again.exit_code != 0 and "--overwrite" in again.output and "Traceback" not in again.output
     res = CliRunner().invoke(
         main, ["reconstruct", str(out), "--method", "pseudo", "--sequencing", "none", "--json"]
     )
     assert res.exit_code == 0, res.output
-    assert json.loads(res.output.strip().splitlines()[-1])["n_joints"] == info["n_joints"]
+    assert "warning" not in res.stderr  # the file records its unit: nothing is guessed
+    assert json.loads(res.stdout.strip().splitlines()[-1])["n_joints"] == info["n_joints"]

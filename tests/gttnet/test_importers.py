@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -115,7 +116,7 @@ def noisy_sample(scene_factory) -> CaptureSample:
 def test_round_trip_matches_make_view(tmp_path, noisy_sample, layout, sequencing):
     path = tmp_path / f"cap.{layout}"
     (write_dloe_mat if layout == "mat" else write_gttnet_json)(noisy_sample, path)
-    loaded = load_input(path, sequencing=sequencing, seed=5)
+    loaded = load_input(path, sequencing=sequencing, seed=5, units="inch")
     obs, gt = loaded.observations, loaded.ground_truth
     ref_obs, ref_gt = make_view(noisy_sample, "full")
     # Map every view image back to the sample by its true time rank.
@@ -148,6 +149,42 @@ def test_mat_pixels_and_units(tmp_path, noisy_sample):
     cap_cm = read_dloe_mat(tmp_path / "a.mat", units="cm")
     np.testing.assert_allclose(cap_cm.points3d, cap.points3d * (0.01 / INCH))
     np.testing.assert_array_equal(cap.image_size, noisy_sample.image_size)
+
+
+@pytest.mark.parametrize("layout", ["mat", "json"])
+def test_unrecorded_units_are_metres_with_a_warning(tmp_path, noisy_sample, layout):
+    """An authors' file records no unit: metres are assumed and a warning names the file and --units inch."""
+    path = tmp_path / f"cap.{layout}"
+    (write_dloe_mat if layout == "mat" else write_gttnet_json)(noisy_sample, path)  # inches, unrecorded
+    with pytest.warns(
+        UserWarning, match=rf"^{path}: the .* layout records no length unit; assuming m; .*--units inch"
+    ):
+        guessed = load_input(path, sequencing="full")
+    told = load_input(path, sequencing="full", units="inch")
+    assert guessed.units == "m" and told.units == "inch"
+    np.testing.assert_allclose(guessed.ground_truth.points3d, told.ground_truth.points3d / INCH, rtol=1e-12)
+
+
+def test_recorded_units_are_used_and_a_contradiction_refused(tmp_path, noisy_sample):
+    """A file that records its unit (our writer's ``units`` key) reads right with no warning and no --units."""
+    path = tmp_path / "cap.json"
+    write_gttnet_json(noisy_sample, path, units="inch")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loaded = load_input(path, sequencing="full")
+    assert loaded.units == "inch"
+    np.testing.assert_allclose(
+        loaded.ground_truth.points3d,
+        noisy_sample.points3d[np.argsort(noisy_sample.timestamp_s, kind="stable")],
+        atol=1e-12,
+    )
+    with pytest.raises(ImportFormatError, match=rf"^{path}: the file records units 'inch', --units says 'm'"):
+        load_input(path, units="m")
+    write_gttnet_json(noisy_sample, path, units="furlong")
+    with pytest.raises(
+        ImportFormatError, match=r"the file's units: expected one of m, mm, cm, inch, found 'furlong'"
+    ):
+        read_gttnet_json(path)
 
 
 def test_mat_without_order_refuses_full(tmp_path, noisy_sample):

@@ -48,8 +48,10 @@ def test_json_summary_and_output(files, tmp_path, layout, method, seq):
     if layout not in files:
         pytest.skip("shard writer not available")
     out = tmp_path / "rec.npz"
-    res = _run(files[layout], "--method", method, "--sequencing", seq, "--out", out, "--json")
+    units = [] if layout == "h5" else ["--units", "inch"]  # the test files are in the authors' inches
+    res = _run(files[layout], "--method", method, "--sequencing", seq, *units, "--out", out, "--json")
     assert res.exit_code == 0, res.output
+    assert "warning" not in res.stderr  # the unit was given, not guessed
     lines = [ln for ln in res.stdout.splitlines() if ln.strip()]
     assert len(lines) == 1
     summary = json.loads(lines[0])
