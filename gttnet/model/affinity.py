@@ -55,7 +55,7 @@ class AffinityHead(nn.Module):
     def forward(
         self,
         feats: torch.Tensor,
-        slot_feats: torch.Tensor,
+        slot_feats: torch.Tensor | None,
         index: torch.Tensor,
         mask: torch.Tensor,
         *,
@@ -65,7 +65,8 @@ class AffinityHead(nn.Module):
 
         Args:
             feats: Bottleneck features per image, shape ``(N, P, 3)``.
-            slot_feats: Bottleneck features of each patch slot, shape ``(N, K+1, P, 3)`` (reference mode).
+            slot_feats: Bottleneck features of each patch slot, shape ``(N, K+1, P, 3)`` (reference mode;
+                may be None in paper mode).
             index: Patch slot image indices (slot 0 = self), shape ``(N, K+1)``.
             mask: Real slots, shape ``(N, K+1)`` bool.
             top_q: Entries kept per row for this call; None = ``self.top_q``.
@@ -77,6 +78,8 @@ class AffinityHead(nn.Module):
             f = feats.flatten(1)
             diff = f[index[:, 1:]] - f[:, None]
         else:
+            if slot_feats is None:
+                raise ValueError("the reference affinity needs the bottleneck's slot features")
             f = slot_feats.flatten(2)
             diff = f[:, 1:] - f[:, :1]
         dist = torch.sqrt(diff.pow(2).sum(-1) + self.eps)

@@ -174,7 +174,7 @@ class GTTNetReconstructor:
         lambda2 = self.lambda2 if lambda2 is None else lambda2
         cfg = self.model.config
         seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates).to(self.device)
-        out = self.model([seq], solve=True, top_q=top_q, lambda2=lambda2)[0]
+        out = self.model([seq], solve=True, top_q=top_q, lambda2=lambda2, decode=False)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         x_est = out.x_est.double().cpu().numpy()
         if obs.sequencing == "none":

@@ -155,6 +155,7 @@ class GTTNet(nn.Module):
         solve: bool = True,
         top_q: int | None = None,
         lambda2: float | None = None,
+        decode: bool = True,
     ) -> list[SequenceOutput]:
         """Run the network on a list of sequences.
 
@@ -163,9 +164,11 @@ class GTTNet(nn.Module):
             solve: Run the DLOE layer (needed for ℓ^X, ℓ^S and inference; stage 1 skips it).
             top_q: Affinities kept per row for this call; None = ``config.top_q``.
             lambda2: Ray weight of the DLOE layer for this call; None = ``config.lambda2``.
+            decode: Run the U-Net's decoder, whose outputs feed only the autoencoding loss (``ae_pairs``);
+                inference passes False (same affinities and structure, half the layers).
 
         Returns:
-            One :class:`SequenceOutput` per sequence.
+            One :class:`SequenceOutput` per sequence (``ae_pairs`` empty without the decoder).
         """
         if not batch:
             raise ValueError("batch must hold at least one sequence")
@@ -185,7 +188,9 @@ class GTTNet(nn.Module):
         x = torch.cat(xs)
         index, mask = patch_index(torch.cat(nbrs))
         seg = torch.cat(segs)
-        u = self.unet(x, index, mask, seg, len(batch))
+        u = self.unet(
+            x, index, mask, seg, len(batch), decode=decode, slots=self.config.affinity_mode == "reference"
+        )
         aff = self.affinity(u.bottleneck, u.bottleneck_slots, index, mask, top_q=top_q)
         outs, start = [], 0
         for seq, n, recon in zip(batch, sizes, recons, strict=True):

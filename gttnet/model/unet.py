@@ -19,14 +19,16 @@ class UNetOutput:
 
     Args:
         bottleneck: Latent features F^l, shape ``(N, P_L, 3)``.
-        bottleneck_slots: Joint-mixed, normalised patch of the bottleneck layer, shape ``(N, K+1, P_L, 3)``.
-        output: Reconstruction of the (normalised) input, shape ``(N, P_0, 3)``.
-        pairs: ``(decoder, encoder)`` feature pairs for ℓ^AE, output/input first, then each hidden level.
+        bottleneck_slots: Joint-mixed, normalised patch of the bottleneck layer, shape ``(N, K+1, P_L, 3)``;
+            None when not asked for (``slots=False``).
+        output: Reconstruction of the (normalised) input, shape ``(N, P_0, 3)``; None without the decoder.
+        pairs: ``(decoder, encoder)`` feature pairs for ℓ^AE, output/input first, then each hidden level
+            (empty without the decoder).
     """
 
     bottleneck: torch.Tensor
-    bottleneck_slots: torch.Tensor
-    output: torch.Tensor
+    bottleneck_slots: torch.Tensor | None
+    output: torch.Tensor | None
     pairs: list[tuple[torch.Tensor, torch.Tensor]]
 
 
@@ -75,7 +77,15 @@ class ContinuousConvUNet(nn.Module):
         self.dec_norms = nn.ModuleList(PointSetNorm(full[i]) for i in range(depth - 1, 0, -1))
 
     def forward(
-        self, x: torch.Tensor, index: torch.Tensor, mask: torch.Tensor, seg: torch.Tensor, n_seg: int
+        self,
+        x: torch.Tensor,
+        index: torch.Tensor,
+        mask: torch.Tensor,
+        seg: torch.Tensor,
+        n_seg: int,
+        *,
+        decode: bool = True,
+        slots: bool = True,
     ) -> UNetOutput:
         """Encode and decode a packed batch of sequences.
 
@@ -85,19 +95,26 @@ class ContinuousConvUNet(nn.Module):
             mask: Real slots, shape ``(N, K+1)`` bool.
             seg: Sequence id of each image, shape ``(N,)``.
             n_seg: Number of sequences S.
+            decode: Run the decoder (its outputs feed only the autoencoding loss ℓ^AE; the affinity reads
+                the bottleneck, so inference skips it: half the layers, same affinities).
+            slots: Normalise and return the bottleneck's per-slot features (the reference affinity only).
 
         Returns:
             :class:`UNetOutput`.
         """
         enc = [x]
-        slots = x.new_zeros(0)
+        patch = x.new_zeros(0)
         for conv, norm in zip(self.encoders, self.enc_norms, strict=True):
-            h, slots = conv(enc[-1], index, mask)
+            h, patch = conv(enc[-1], index, mask)
             enc.append(norm(h, seg, n_seg))
-        n, s = slots.shape[:2]
-        slot_seg = seg[:, None].expand(n, s).reshape(-1)
-        slots = self.enc_norms[-1](slots.reshape(n * s, *slots.shape[2:]), slot_seg, n_seg)
-        slots = slots.reshape(n, s, *slots.shape[1:])
+        bottleneck_slots = None
+        if slots:
+            n, s = patch.shape[:2]
+            slot_seg = seg[:, None].expand(n, s).reshape(-1)
+            patch = self.enc_norms[-1](patch.reshape(n * s, *patch.shape[2:]), slot_seg, n_seg)
+            bottleneck_slots = patch.reshape(n, s, *patch.shape[1:])
+        if not decode:
+            return UNetOutput(bottleneck=enc[-1], bottleneck_slots=bottleneck_slots, output=None, pairs=[])
         depth = len(self.encoders)
         pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
         d = enc[-1]
@@ -108,4 +125,4 @@ class ContinuousConvUNet(nn.Module):
             if level > 0:
                 d = self.dec_norms[j](d, seg, n_seg)
             pairs.append((d, enc[level]))
-        return UNetOutput(bottleneck=enc[-1], bottleneck_slots=slots, output=d, pairs=pairs[::-1])
+        return UNetOutput(bottleneck=enc[-1], bottleneck_slots=bottleneck_slots, output=d, pairs=pairs[::-1])

@@ -226,6 +226,21 @@ def test_network_forward(small_view, sequencing, builder):
     assert model([seq], solve=False)[0].x_est is None
 
 
+@pytest.mark.parametrize("mode", ["paper", "reference"])
+def test_inference_without_decoder_gives_the_same_affinity_and_structure(small_view, mode):
+    # The decoder feeds only the autoencoding loss: skipping it at inference must change nothing else.
+    torch.manual_seed(0)
+    model = build_model("gttnet_tiny", n_joints=5, k=6, affinity_mode=mode).eval()
+    obs, _ = make_view(small_view, "none")
+    seq = prepare_inputs(obs, k=6)
+    with torch.no_grad():
+        full, lean = model([seq])[0], model([seq], decode=False)[0]
+    assert full.ae_pairs and not lean.ae_pairs
+    torch.testing.assert_close(lean.affinity.values, full.affinity.values, rtol=0, atol=0)
+    torch.testing.assert_close(lean.a_sparse, full.a_sparse, rtol=0, atol=0)
+    torch.testing.assert_close(lean.x_est, full.x_est, rtol=0, atol=0)
+
+
 def test_network_rejects_wrong_joint_count(small_view):
     model = build_model("gttnet_tiny", k=6)  # 31 joints
     seq = prepare_inputs(make_view(small_view, "none")[0], k=6)
