@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 import scipy.linalg
-from scipy.sparse import csr_matrix
+from scipy.sparse import csr_matrix, issparse
 from scipy.sparse.csgraph import connected_components
 
 __all__ = [
@@ -23,7 +23,20 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-def _symmetric_affinity(A: np.ndarray) -> np.ndarray:
+def _symmetric_affinity(A: np.ndarray | csr_matrix) -> np.ndarray | csr_matrix:
+    """``(A + A^T) / 2`` with a zero diagonal, checked; a SciPy sparse ``A`` gives a CSR matrix."""
+    if issparse(A):
+        A = csr_matrix(A, dtype=np.float64)
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"affinity must have shape (N, N), got {A.shape}")
+        if not np.all(np.isfinite(A.data)):
+            raise ValueError("affinity must be finite, found NaN or inf")
+        if np.any(A.data < 0):
+            raise ValueError(f"affinity must be non-negative, found minimum {A.data.min():.3g}")
+        Ss = csr_matrix(0.5 * (A + A.T))
+        Ss.setdiag(0.0)
+        Ss.eliminate_zeros()
+        return Ss
     A = np.asarray(A, dtype=np.float64)
     if A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"affinity must have shape (N, N), got {A.shape}")
@@ -36,11 +49,12 @@ def _symmetric_affinity(A: np.ndarray) -> np.ndarray:
     return S
 
 
-def graph_components(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
+def graph_components(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndarray:
     """Connected components of the undirected graph of an affinity (an event segmentation).
 
     Args:
-        A: Non-negative affinity, shape ``(N, N)``; symmetrised as ``(A + A^T) / 2``.
+        A: Non-negative affinity, shape ``(N, N)`` (dense or SciPy sparse); symmetrised as
+            ``(A + A^T) / 2``.
         tol: Edges with a weight ``<= tol`` are ignored.
 
     Returns:
@@ -53,7 +67,7 @@ def graph_components(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
         [0, 0, 1, 1]
     """
     S = _symmetric_affinity(A)
-    _, raw = connected_components(csr_matrix(S > tol), directed=False)
+    _, raw = connected_components(csr_matrix(S > tol), directed=False)  # sparse S: S > tol stays sparse
     labels = np.unique(raw)
     sizes = np.array([np.count_nonzero(raw == c) for c in labels])
     first = np.array([np.flatnonzero(raw == c)[0] for c in labels])
@@ -69,7 +83,7 @@ _SPARSE_MIN_NODES = 400
 _SPARSE_MAX_DENSITY = 0.05
 
 
-def _fiedler(S: np.ndarray) -> np.ndarray:
+def _fiedler(S: np.ndarray | csr_matrix) -> np.ndarray:
     """Fiedler vector of the combinatorial Laplacian ``diag(S 1) - S`` of a connected graph.
 
     Large sparse graphs (the top-Q affinities of GTT-Net and DLOE) use shift-invert Lanczos on the
@@ -77,7 +91,7 @@ def _fiedler(S: np.ndarray) -> np.ndarray:
     the dense ``eigh`` costs ``O(n^3)``.
     """
     n = S.shape[0]
-    nnz = int(np.count_nonzero(S))
+    nnz = int(S.nnz) if isinstance(S, csr_matrix) else int(np.count_nonzero(S))
     if n > _SPARSE_MIN_NODES and nnz <= _SPARSE_MAX_DENSITY * n * n:
         from scipy.sparse import diags
         from scipy.sparse.linalg import eigsh
@@ -88,6 +102,8 @@ def _fiedler(S: np.ndarray) -> np.ndarray:
         sigma = -1e-6 * max(float(deg.mean()), 1e-12)
         vals, vec = eigsh(L, k=2, sigma=sigma, which="LM", v0=np.ones(n) / np.sqrt(n) + np.arange(n) / n**1.5)
         return np.asarray(vec[:, np.argsort(vals)[-1]])
+    if isinstance(S, csr_matrix):
+        S = S.toarray()
     L = np.diag(S.sum(axis=1)) - S
     # Only the two smallest eigenpairs are needed; subset_by_index avoids a full decomposition.
     _, vec = scipy.linalg.eigh(L, subset_by_index=[0, min(1, n - 1)])
@@ -103,7 +119,7 @@ def _runs_backwards(local: np.ndarray) -> bool:
     return bool(rank[0] > rank[-1])
 
 
-def spectral_order(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
+def spectral_order(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndarray:
     """Recover the image sequence from an affinity by the Fiedler vector of its Laplacian.
 
     The graph ``(A + A^T) / 2`` is split into connected components (:func:`graph_components`): the
@@ -114,7 +130,8 @@ def spectral_order(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
     the natural direction).
 
     Args:
-        A: Non-negative affinity, shape ``(N, N)``.
+        A: Non-negative affinity, shape ``(N, N)``: a dense array or a SciPy sparse matrix (the same
+            order, without ever forming ``N x N``; large sparse components are solved sparsely either way).
         tol: Edges with a weight ``<= tol`` are ignored when splitting components.
 
     Returns:
@@ -136,7 +153,7 @@ def spectral_order(A: np.ndarray, *, tol: float = 0.0) -> np.ndarray:
         if idx.shape[0] <= 2:
             sequence.append(idx)
             continue
-        f = _fiedler(S[np.ix_(idx, idx)])
+        f = _fiedler(S[idx][:, idx] if issparse(S) else S[np.ix_(idx, idx)])
         local = np.argsort(f, kind="stable")
         if _runs_backwards(local):
             local = local[::-1]
@@ -222,7 +239,7 @@ def symmetrise(A: np.ndarray) -> np.ndarray:
     return S
 
 
-def pose_graph_affinity(X: np.ndarray, *, k: int = 16) -> np.ndarray:
+def pose_graph_affinity(X: np.ndarray, *, k: int = 16, sparse: bool = False) -> np.ndarray | csr_matrix:
     """A k-nearest-neighbour graph over reconstructed poses, for ordering images by what they show.
 
     Each image is linked to the ``k`` images whose whole poses are nearest (Euclidean distance over all
@@ -233,6 +250,8 @@ def pose_graph_affinity(X: np.ndarray, *, k: int = 16) -> np.ndarray:
     Args:
         X: Poses, shape ``(N, J, 3)``, any unit; NaN joints are not allowed.
         k: Links per image (clipped to ``N - 1``).
+        sparse: Return a SciPy CSR matrix (``N k`` entries) instead of a dense array; the same entries, and
+            :func:`spectral_order` gives the same order, without an ``N x N`` array.
 
     Returns:
         Non-negative affinity, shape ``(N, N)``, zero diagonal (not symmetric; :func:`spectral_order`
@@ -252,16 +271,19 @@ def pose_graph_affinity(X: np.ndarray, *, k: int = 16) -> np.ndarray:
     if not np.isfinite(F).all():
         raise ValueError("pose_graph_affinity: X holds NaN or inf joints; fill them first")
     n = F.shape[0]
-    A = np.zeros((n, n))
     k = min(int(k), n - 1)
     if k < 1:
-        return A
+        return csr_matrix((n, n)) if sparse else np.zeros((n, n))
     dist, nbr = cKDTree(F).query(F, k=k + 1)
     dist, nbr = dist[:, 1:], nbr[:, 1:]  # drop each image itself
     s2 = float(np.median(dist**2))
     w = np.exp(-(dist**2) / s2) if s2 > 0 else np.ones_like(dist)
-    A[np.repeat(np.arange(n), k), nbr.ravel()] = w.ravel()
-    np.fill_diagonal(A, 0.0)
+    rows = np.repeat(np.arange(n), k)
+    off = nbr.ravel() != rows  # an image listed among its own neighbours (duplicate poses): no self-link
+    if sparse:
+        return csr_matrix((w.ravel()[off], (rows[off], nbr.ravel()[off])), shape=(n, n))
+    A = np.zeros((n, n))
+    A[rows[off], nbr.ravel()[off]] = w.ravel()[off]
     return A
 
 

@@ -181,7 +181,7 @@ class GTTNetReconstructor:
             # Ordered by the poses the network reconstructed, not by its affinity: on the paper protocol's
             # validation split (16 sequences, bundled model) Kendall tau 0.70 against 0.63 for the spectral
             # order of the learned neighbourhood affinity (k = 8: 0.65, k = 4: 0.39; k chosen there).
-            order = spectral_order(pose_graph_affinity(x_est, k=16))
+            order = spectral_order(pose_graph_affinity(x_est, k=16, sparse=True))
         else:
             order = _given_order(obs, affinity)
         return Reconstruction(

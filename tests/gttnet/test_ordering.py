@@ -98,6 +98,27 @@ def test_sparse_fiedler_matches_dense_on_a_large_chain(monkeypatch):
     assert sparse.tolist() == truth.tolist() or sparse.tolist() == (n - 1 - truth).tolist()
 
 
+def test_sparse_matrix_input_gives_the_dense_order():
+    """A SciPy sparse affinity (GTT-Net's neighbourhood graph) is ordered exactly as its dense form."""
+    from scipy.sparse import csr_matrix
+
+    g = np.random.default_rng(4)
+    for n in (9, 600):  # dense eigh below 400 nodes, shift-invert Lanczos above
+        perm = g.permutation(n)
+        A = np.zeros((n, n))
+        A[perm[:-1], perm[1:]] = g.uniform(0.5, 1.0, n - 1)
+        A[perm[:-3], perm[3:]] = g.uniform(0.0, 0.3, n - 3)
+        A[np.arange(n), np.arange(n)] = 0.7  # a diagonal is ignored both ways
+        half, rest = perm[: n // 2], perm[n // 2 :]
+        A[rest[:, None], half[None, :]] = A[half[:, None], rest[None, :]] = 0.0  # two components
+        np.testing.assert_array_equal(spectral_order(csr_matrix(A)), spectral_order(A))
+        labels = graph_components(csr_matrix(A))
+        np.testing.assert_array_equal(labels, graph_components(A))
+        assert labels.max() == 1
+    with pytest.raises(ValueError, match="non-negative"):
+        spectral_order(csr_matrix(-np.eye(3)))
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(1, 4), st.integers(1, 15), st.integers(0, 10_000))
 def test_stream_consistent_order_never_contradicts_a_stream(n_cams, n, seed):
@@ -140,6 +161,17 @@ def test_pose_graph_order_recovers_a_shuffled_smooth_motion():
     perm = rng.permutation(len(t))
     rank = spectral_order(pose_graph_affinity(X[perm], k=8))
     assert kendall_tau(rank, perm) > 0.99  # image i of the shuffled set is frame perm[i]
+
+
+def test_sparse_pose_graph_is_the_dense_one():
+    g = np.random.default_rng(5)
+    X = np.cumsum(g.normal(size=(500, 4, 3)), axis=0)[g.permutation(500)]
+    X[7] = X[8]  # duplicate poses: neither links to itself
+    dense = pose_graph_affinity(X, k=6)
+    sparse = pose_graph_affinity(X, k=6, sparse=True)
+    np.testing.assert_array_equal(sparse.toarray(), dense)
+    assert np.all(np.diag(dense) == 0)
+    np.testing.assert_array_equal(spectral_order(sparse), spectral_order(dense))
 
 
 def test_pose_graph_affinity_links_k_per_image_and_refuses_nan():
