@@ -1,6 +1,6 @@
 """Benchmark of the k-d tree candidate search against the dense pairwise search (``none`` sequencing).
 
-Run:  python benchmarks/bench_candidates.py [--window-s 12] [--n-seq 8] [--runs 3]
+Run:  python benchmarks/bench_candidates.py [--window-s 12] [--n-seq 8] [--runs 3] [--dloe-kdtree]
 
 Data: test samples of the paper recipe with a longer window (12 s = 1,440 images of 4 cameras at 30 Hz),
 built in memory; samples where fewer than 90 % of the joints are observed (the subject leaves the
@@ -11,10 +11,15 @@ medians over sequences (min..max in brackets):
 * recall of the dense search's K = 20 neighbours (``vs dense``);
 * recall of the true temporal neighbours: the share of an image's K neighbours that are among the K
   images of other cameras nearest to it in true time (ground truth used for scoring only);
-* X_init error (MPJPE, mm) and GTT-Net's MPJPE (mm, bundled model) and seconds with that search;
-* the ratio of DLOE's seconds to GTT-Net's, both measured on the same sequences in this run.
+* X_init error (MPJPE, mm) and GTT-Net's MPJPE (mm, bundled model) and seconds with that search
+  (wall and CPU, each the median of ``--runs`` full ``reconstruct`` calls per sequence);
+* the ratio of DLOE's seconds to GTT-Net's, both measured on the same sequences in this run, per
+  sequence (wall and CPU seconds); ``--dloe-kdtree`` also times DLOE on the k-d tree candidates.
 
-BLAS and torch are pinned to one thread.
+Fairness: both methods get the same observations through :func:`gttnet.methods.reconstruct` in the same
+process, with BLAS and torch pinned to one thread; each timed call includes its own pseudo-triangulation
+and order. The models are loaded (and every code path run once) before any timing, so no timed call
+pays for loading a model.
 """
 
 from __future__ import annotations
@@ -59,6 +64,17 @@ def true_neighbours(t: np.ndarray, cam: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def timed(runs: int, fn, *args, **kwargs):
+    """``(last result, median wall s, median CPU s)`` of ``runs`` calls of ``fn(*args, **kwargs)``."""
+    walls, cpus = [], []
+    for _ in range(runs):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn(*args, **kwargs)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return out, statistics.median(walls), statistics.median(cpus)
+
+
 def recall(found: np.ndarray, ref: np.ndarray) -> float:
     return float(np.mean([len(set(a[a >= 0]) & set(b)) / len(b) for a, b in zip(found, ref, strict=True)]))
 
@@ -70,6 +86,7 @@ def main() -> None:
     p.add_argument("--n-seq", type=int, default=8)
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--no-dloe", action="store_true")
+    p.add_argument("--dloe-kdtree", action="store_true", help="Also time DLOE on the k-d tree candidates.")
     p.add_argument(
         "--searches",
         default="all",
@@ -89,10 +106,14 @@ def main() -> None:
         keys.insert(0, "dense")  # the reference of the recall column
     searches = dict(all_searches[k] for k in keys)
     rows = {
-        name: {k: [] for k in ("sec", "vs_dense", "temporal", "xinit", "gtt", "gtt_sec")} for name in searches
+        name: {k: [] for k in ("sec", "vs_dense", "temporal", "xinit", "gtt", "gtt_sec", "gtt_cpu")}
+        for name in searches
     }
-    dloe_sec: list[float] = []
-    dloe_err: list[float] = []
+    dloe_cfgs = {"dense": "DLOE (dense, its default)"}
+    if args.dloe_kdtree:
+        dloe_cfgs["kdtree"] = "DLOE (kdtree candidates)"
+    dloe = {c: {"sec": [], "cpu": [], "err": []} for c in dloe_cfgs}
+    warm = False
     n_used = idx = 0
     while n_used < args.n_seq and idx < 10 * args.n_seq:
         sample = build_sample(recipe, "test", idx)[0]
@@ -129,31 +150,55 @@ def main() -> None:
                     *a, **{**kw, **_o}
                 )
             try:
-                rec = reconstruct(obs, "gttnet", candidates="dense" if opts is None else "kdtree")
+                cand = "dense" if opts is None else "kdtree"
+                if not warm:  # load this configuration's model before timing
+                    reconstruct(obs, "gttnet", candidates=cand)
+                rec, wall, cpu = timed(args.runs, reconstruct, obs, "gttnet", candidates=cand)
             finally:
                 cand_mod.candidate_pseudo_triangulate = orig
             row["gtt"].append(mpjpe_mm(rec.points3d, gt.points3d))
-            row["gtt_sec"].append(rec.seconds)
+            row["gtt_sec"].append(wall)
+            row["gtt_cpu"].append(cpu)
         if not args.no_dloe:
-            rec = reconstruct(obs, "dloe")
-            dloe_sec.append(rec.seconds)
-            dloe_err.append(mpjpe_mm(rec.points3d, gt.points3d))
+            for c, d in dloe.items():
+                rec, wall, cpu = timed(args.runs, reconstruct, obs, "dloe", candidates=c)
+                d["sec"].append(wall)
+                d["cpu"].append(cpu)
+                d["err"].append(mpjpe_mm(rec.points3d, gt.points3d))
+        warm = True
         print(f"sequence {idx - 1}: {obs.n_images} images done", flush=True)
-    print(f"\n{n_used} sequences of {obs.n_images} images, none sequencing, K = {K}; median (min..max)")
+    report(rows, dloe, dloe_cfgs, n_used, obs.n_images, no_dloe=args.no_dloe)
+
+
+def report(rows: dict, dloe: dict, dloe_cfgs: dict, n_used: int, n_images: int, *, no_dloe: bool) -> None:
+    """Print the search table and the DLOE / GTT-Net ratios."""
+    print(f"\n{n_used} sequences of {n_images} images, none sequencing, K = {K}; median (min..max)")
     print(
-        "| search | pseudo-tri + neighbours s | recall vs dense | temporal recall | X_init mm | GTT-Net mm | GTT-Net s |"
+        "| search | pseudo-tri + neighbours s | recall vs dense | temporal recall | X_init mm | GTT-Net mm "
+        "| GTT-Net s | GTT-Net CPU s |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for name, row in rows.items():
         print(
             f"| {name} | {fmt(row['sec'], '.3f')} | {fmt(row['vs_dense'])} | {fmt(row['temporal'])} | "
-            f"{fmt(row['xinit'], '.1f')} | {fmt(row['gtt'], '.1f')} | {fmt(row['gtt_sec'])} |"
+            f"{fmt(row['xinit'], '.1f')} | {fmt(row['gtt'], '.1f')} | {fmt(row['gtt_sec'], '.3f')} | "
+            f"{fmt(row['gtt_cpu'], '.3f')} |"
         )
-    if dloe_sec:
-        print(f"\nDLOE (dense, its default): {fmt(dloe_sec)} s, MPJPE {fmt(dloe_err, '.1f')} mm")
-        for name, row in rows.items():
-            ratios = [d / g for d, g in zip(dloe_sec, row["gtt_sec"], strict=True)]
-            print(f"DLOE / GTT-Net ({name}): {fmt(ratios, '.1f')}x (per-sequence ratios)")
+    if no_dloe:
+        return
+    print("\n| DLOE | MPJPE mm | s | CPU s |" + "".join(f" / GTT-Net {n} (wall; CPU) |" for n in rows))
+    print("|---|---|---|---|" + "---|" * len(rows))
+    for c, d in dloe.items():
+        cells = []
+        for row in rows.values():
+            wall = [a / b for a, b in zip(d["sec"], row["gtt_sec"], strict=True)]
+            cpu = [a / b for a, b in zip(d["cpu"], row["gtt_cpu"], strict=True)]
+            cells.append(f" {fmt(wall, '.1f')}x; {fmt(cpu, '.1f')}x |")
+        print(
+            f"| {dloe_cfgs[c]} | {fmt(d['err'], '.1f')} | {fmt(d['sec'])} | {fmt(d['cpu'])} |"
+            + "".join(cells)
+        )
+    print("(ratios: per sequence, each side the median of its runs; median (min..max) over sequences)")
 
 
 if __name__ == "__main__":
