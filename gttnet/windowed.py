@@ -11,15 +11,14 @@ Placing images in time (:func:`approximate_times`):
 
 * ``full``: the timestamps.
 * ``partial``: the streams' relative timing is unknown, only each stream's own order. The cameras'
-  clocks are recovered from the skeletons (:func:`gttnet.sync.recover_clocks`, full offset search) on
-  the recording's first :data:`SYNC_PREFIX_IMAGES` images, and every image is placed by those clocks
-  (:func:`synced_times`); clock recovery over the whole recording searches offsets over its whole
-  length and grows faster than linearly (measured 1.1 s at 1,440 images, 7 s at 7,200, 48 s at
-  24,000), while offsets found on the first 20 s (2,400 images of 4 cameras at 30 Hz) carry over: a
-  clock-rate error of 100 ppm, not estimated on 20 s, moves an image by 60 ms (2 frames at 30 Hz)
-  after 10 minutes, well inside a window's overlap. If clock recovery fails, images are placed at their stream's elapsed fraction, ``(rank in stream + 0.5) /
-  images in stream`` (:func:`approximate_times`), which assumes streams spanning the same recording at
-  the same rate.
+  clocks are recovered from the skeletons over the whole recording (:func:`gttnet.sync.recover_clocks`),
+  and every image is placed by those clocks (:func:`synced_times`). Long recordings are recovered
+  piecewise, in time linear in their length: the full offset search on the first 20 s, then offsets
+  and clock drift from windows spread over the whole recording, so a clock-rate error (100 ppm is 60 ms,
+  two frames at 30 Hz, after 10 minutes) is followed to the end (``benchmarks/bench_sync_long.py``).
+  If clock recovery fails, images are placed at their stream's elapsed fraction, ``(rank in stream +
+  0.5) / images in stream`` (:func:`approximate_times`), which assumes streams spanning the same
+  recording at the same rate.
 
 Window length (``window="auto"``, :func:`auto_window`): ``80 V`` images (320 for 4 cameras, ~2.7 s
 at 30 Hz each) with a quarter of it as overlap. That is the length the bundled GTT-Net model and the
@@ -49,7 +48,6 @@ from gttnet.methods import Reconstruction, check_sequencing, method_spec
 
 __all__ = [
     "AUTO_MIN_IMAGES",
-    "SYNC_PREFIX_IMAGES",
     "synced_times",
     "WindowPlan",
     "approximate_times",
@@ -66,9 +64,6 @@ AUTO_MIN_IMAGES = 2000
 
 #: Images per camera in an automatic window.
 _PER_CAMERA = 80
-
-#: Images (all cameras together) at the start of a partial recording on which clocks are recovered.
-SYNC_PREFIX_IMAGES = 2400
 
 
 @dataclass(frozen=True)
@@ -127,12 +122,11 @@ def approximate_times(obs: Observations) -> np.ndarray:
     return t
 
 
-def synced_times(obs: Observations, *, prefix_images: int = SYNC_PREFIX_IMAGES) -> np.ndarray:
-    """Capture time of every image from clocks recovered on the recording's start, seconds, shape ``(N,)``.
+def synced_times(obs: Observations) -> np.ndarray:
+    """Capture time of every image from clocks recovered over the whole recording, seconds, shape ``(N,)``.
 
-    Each camera contributes its first ``prefix_images / V`` frames (by stream order) to
-    :func:`gttnet.sync.recover_clocks` (nominal 30 Hz); the recovered offsets and rates then time every
-    image (:func:`gttnet.sync.clock_times`).
+    :func:`gttnet.sync.recover_clocks` (nominal 30 Hz; piecewise and linear in N on long recordings,
+    with drift over 30 s) times every image (:func:`gttnet.sync.clock_times`).
 
     Raises:
         GttNetError: If clock recovery fails (e.g. a single camera).
@@ -140,13 +134,7 @@ def synced_times(obs: Observations, *, prefix_images: int = SYNC_PREFIX_IMAGES) 
     """
     from gttnet.sync import clock_times, recover_clocks
 
-    cam = np.asarray(obs.cam_id)
-    cams = np.unique(cam)
-    per = max(int(np.ceil(prefix_images / max(cams.size, 1))), 2)
-    order = np.lexsort((np.asarray(obs.stream_index), cam))
-    keep = np.concatenate([order[cam[order] == c][:per] for c in cams])
-    sub, _ = subset_observations(obs, keep)
-    return clock_times(obs, recover_clocks(sub))
+    return clock_times(obs, recover_clocks(obs))
 
 
 def auto_window(obs: Observations) -> tuple[int, int]:

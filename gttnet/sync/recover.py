@@ -10,14 +10,23 @@ fit of every ray-meeting residual, whose Jacobian gives each offset's uncertaint
 Cost: for each of the ``V (V - 1) / 2`` camera pairs, the coarse search evaluates at most
 ``max_coarse_images`` images at every coarse shift (a fixed cost per pair times the searched range),
 the fine search and the refinement evaluate every image a fixed number of times: linear in the number
-of images N for a fixed search range, never an N x N matrix.
+of images N for a fixed search range, never an N x N matrix. The searched range, though, is the whole
+recording unless ``max_offset_s`` bounds it, and so is the refinement's every image: measured 1.1 s at
+1,440 images, 7 s at 7,200 and 48 s at 24,000. Long recordings (streams spanning more than
+:data:`PIECEWISE_FROM_S`) are therefore recovered piecewise (:func:`recover_clocks`, ``piecewise``): the
+full search on each camera's first :data:`SEGMENT_S` seconds only, then a local search around those
+offsets in :data:`N_WINDOWS` windows of :data:`WINDOW_S` seconds spread over the whole recording, whose
+shifts give every camera's offset and drift by a robust linear fit, refined on the windows' images
+together. The cost is then a fixed amount of search plus work linear in N (placing the images), and
+drift over the whole recording is followed: the windows at its end see what the start cannot.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -26,11 +35,32 @@ from gttdata.capture.views import Observations
 from gttnet.errors import GttNetError
 from gttnet.sync.clocks import Clocks, local_times, per_camera_rates
 
-__all__ = ["Stream", "ray_meeting_error", "pair_offset", "recover_clocks"]
+__all__ = [
+    "N_WINDOWS",
+    "PIECEWISE_FROM_S",
+    "SEGMENT_S",
+    "WINDOW_S",
+    "Stream",
+    "pair_offset",
+    "ray_meeting_error",
+    "recover_clocks",
+]
 
 log = logging.getLogger(__name__)
 
 _SIN2_MIN = 1e-3  # rays closer than ~1.8 degrees to parallel say nothing about time
+
+#: ``piecewise=None`` recovers recordings whose longest stream spans more than this piecewise, seconds.
+PIECEWISE_FROM_S = 40.0
+#: Piecewise recovery: local seconds at each camera's start that get the full offset search.
+SEGMENT_S = 20.0
+#: Piecewise recovery: windows spread over the whole recording, and their length in seconds.
+N_WINDOWS = 8
+WINDOW_S = 5.0
+#: Piecewise recovery: shifts searched around the first offsets: this many seconds, plus this many
+#: seconds per second elapsed since the start (a clock-rate difference of 500 ppm).
+_SEARCH_S = 0.25
+_SEARCH_PER_S = 5e-4
 
 
 @dataclass(frozen=True)
@@ -161,8 +191,17 @@ def ray_meeting_error(
 
 
 def _streams(
-    obs: Observations, tau: np.ndarray, rates: Mapping[int, float], kernel_frames: float
+    obs: Observations,
+    tau: np.ndarray,
+    rates: Mapping[int, float],
+    kernel_frames: float,
+    idx: np.ndarray | None = None,
 ) -> list[Stream]:
+    """One :class:`Stream` per camera (ascending id) of the images ``idx`` (default: all)."""
+    if idx is not None:
+        idx = np.asarray(idx, dtype=np.int64)
+        sub = _streams(obs.take(idx), tau[idx], rates, kernel_frames)
+        return [replace(st, images=idx[st.images]) for st in sub]
     rays, centers = obs.rays(), obs.centers()
     out = []
     for c in np.unique(obs.cam_id):
@@ -224,6 +263,7 @@ def pair_offset(
     cap: float,
     max_offset_s: float | None = None,
     max_coarse_images: int = 48,
+    around_s: float = 0.0,
 ) -> tuple[float, float, float]:
     """Shift ``delta`` with ``tau_b = tau_a + delta`` at the same instant, from the ray-meeting consensus.
 
@@ -236,8 +276,9 @@ def pair_offset(
         a: First stream.
         b: Second stream.
         cap: Errors at or above this (radians) count as disagreement.
-        max_offset_s: Largest ``|delta|`` searched, seconds (None: any overlapping shift).
+        max_offset_s: Largest ``|delta - around_s|`` searched, seconds (None: any overlapping shift).
         max_coarse_images: Frames of ``a`` used by the coarse grid.
+        around_s: Centre of the searched range, seconds (a prediction of ``delta``).
 
     Returns:
         ``(delta_s, score, peak_ratio)``: the shift, its consensus score and the ratio of the best score
@@ -248,7 +289,7 @@ def pair_offset(
     h = 2.0 / max(fa, fb)
     lo, hi = b.tau[0] - a.tau[-1], b.tau[-1] - a.tau[0]
     if max_offset_s is not None:
-        lo, hi = max(lo, -max_offset_s), min(hi, max_offset_s)
+        lo, hi = max(lo, around_s - max_offset_s), min(hi, around_s + max_offset_s)
     if hi <= lo:
         raise GttNetError(
             f"clock recovery: cameras {a.camera} and {b.camera} cannot overlap within max_offset_s={max_offset_s}"
@@ -272,6 +313,18 @@ def pair_offset(
     return float(fine[k] + np.clip(frac, -1.0, 1.0) * step), float(sf[k]), ratio
 
 
+def _huber_lstsq(A: np.ndarray, y: np.ndarray, w0: np.ndarray, scale: float) -> np.ndarray:
+    """``x`` minimising ``sum_r w0_r huber_scale(A_r x - y_r)`` by 20 rounds of IRLS, shape ``(A.shape[1],)``."""
+    w = w0.copy()
+    x = np.zeros(A.shape[1])
+    for _ in range(20):
+        sw = np.sqrt(w)
+        x, *_ = np.linalg.lstsq(A * sw[:, None], y * sw, rcond=None)
+        res = np.abs(A @ x - y)
+        w = w0 * np.where(res <= scale, 1.0, scale / np.maximum(res, 1e-12))
+    return x
+
+
 def _fuse_offsets(n: int, pairs: list[tuple[int, int, float, float]], scale: float) -> np.ndarray:
     """Camera offsets from pairwise offset equations by Huber IRLS.
 
@@ -283,15 +336,29 @@ def _fuse_offsets(n: int, pairs: list[tuple[int, int, float, float]], scale: flo
     w0 = np.zeros(len(pairs))
     for r, (i, j, delta, score) in enumerate(pairs):
         A[r, i], A[r, j], y[r], w0[r] = 1.0, -1.0, delta, max(score, 1e-9)
-    w = w0.copy()
-    o = np.zeros(n)
-    for _ in range(20):
-        sw = np.sqrt(w)
-        sol, *_ = np.linalg.lstsq(A[:, 1:] * sw[:, None], y * sw, rcond=None)
-        o = np.concatenate([[0.0], sol])
-        res = np.abs(A @ o - y)
-        w = w0 * np.where(res <= scale, 1.0, scale / np.maximum(res, 1e-12))
-    return o
+    return np.concatenate([[0.0], _huber_lstsq(A[:, 1:], y, w0, scale)])
+
+
+def _fuse_clocks(
+    n: int, eqs: list[tuple[int, int, float, float, float]], scale: float, drift: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets and drifts (ppm) of ``n`` cameras from shifts measured at several times, by Huber IRLS.
+
+    Each equation ``(i, j, tau_i, delta, score)`` says that camera ``i``'s local time ``tau_i`` and camera
+    ``j``'s ``tau_i + delta`` are the same instant: ``o_i - o_j + e_i tau_i - e_j (tau_i + delta) = delta``
+    with ``e = 1e-6 drift``; camera 0 is the gauge (``o_0 = 0``, ``drift_0 = 0``).
+    """
+    A = np.zeros((len(eqs), 2 * n))
+    y = np.zeros(len(eqs))
+    w0 = np.zeros(len(eqs))
+    for r, (i, j, tau_i, delta, score) in enumerate(eqs):
+        A[r, i], A[r, j] = 1.0, -1.0
+        A[r, n + i], A[r, n + j] = 1e-6 * tau_i, -1e-6 * (tau_i + delta)
+        y[r], w0[r] = delta, max(score, 1e-9)
+    cols = [*range(1, n), *(range(n + 1, 2 * n) if drift else ())]
+    x = np.zeros(2 * n)
+    x[cols] = _huber_lstsq(A[:, cols], y, w0, scale)
+    return x[:n], x[n:]
 
 
 class _Refiner:
@@ -335,6 +402,173 @@ class _Refiner:
         return np.concatenate(out)
 
 
+def _recover(
+    streams: list[Stream],
+    *,
+    f_px: float,
+    cap: float,
+    max_offset_s: float | None,
+    f_scale_px: float,
+    refine: bool,
+    period: float,
+    n_joints: int,
+    drift: bool,
+    init: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """Offsets and drifts (camera 0 the gauge), their uncertainty and diagnostics, from whole streams.
+
+    Without ``init``, the pairwise search over every camera pair fused over the camera graph starts the
+    refinement; with ``init = (offsets, drifts_ppm)`` the refinement starts there.
+    """
+    v = len(streams)
+    info: dict = {"front_end": "epipolar", "estimate_drift": drift, "refined": refine}
+    if init is None:
+        pairs, pair_info = [], []
+        for i in range(v):
+            for j in range(i + 1, v):
+                delta, score, ratio = pair_offset(streams[i], streams[j], cap=cap, max_offset_s=max_offset_s)
+                pairs.append((i, j, delta, score))  # o_i + tau_i = o_j + tau_i + delta: o_i - o_j = delta
+                pair_info.append(
+                    {
+                        "cameras": [streams[i].camera, streams[j].camera],
+                        "shift_s": delta,
+                        "score": score,
+                        "peak_ratio": ratio,
+                    }
+                )
+        info["pairs"] = pair_info
+        o, d = _fuse_offsets(v, pairs, scale=period), np.zeros(v)
+    else:
+        o, d = (np.asarray(a, dtype=np.float64).copy() for a in init)
+    std = np.full(v, np.nan)
+    if not refine:
+        return o, d, std, info
+    ref = _Refiner(streams, f_px, drift)
+    p0 = np.concatenate([o[1:], d[1:]]) if drift else o[1:].copy()
+    steps = np.concatenate([np.full(v - 1, 0.05 * period), np.full(v - 1 if drift else 0, 2.0)])
+    cache: dict = {}
+
+    def fun(p):
+        key = p.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = ref.residuals(p)
+        return cache[key]
+
+    def jac(p):
+        f0 = fun(p)
+        cam = [1 + q % (v - 1) for q in range(p.size)]  # parameter q moves camera cam[q]'s clock
+        cols = [
+            (ref.residuals(p + steps[q] * np.eye(p.size)[q], only=cam[q], base=f0) - f0) / steps[q]
+            for q in range(p.size)
+        ]
+        return np.stack(cols, axis=1)
+
+    x_scale = np.concatenate([np.full(v - 1, period), np.full(v - 1 if drift else 0, 100.0)])
+    res = least_squares(fun, p0, jac=jac, loss="soft_l1", f_scale=f_scale_px, x_scale=x_scale, max_nfev=50)
+    o, d = ref.unpack(res.x)
+    ref.residuals(res.x)
+    dof = max(ref.n_valid - res.x.size, 1)
+    J = res.jac
+    try:
+        cov = np.linalg.inv(J.T @ J) * (2.0 * res.cost / dof)
+    except np.linalg.LinAlgError:
+        cov = np.full((res.x.size, res.x.size), np.nan)
+    # Joints of one image share its timing error: count images, not joints, as independent samples.
+    cov *= n_joints
+    full = np.zeros((v, v))
+    full[1:, 1:] = cov[: v - 1, : v - 1]
+    centre = np.eye(v) - 1.0 / v
+    std = np.sqrt(np.clip(np.diag(centre @ full @ centre.T), 0.0, None))
+    info.update(
+        {"nfev": int(res.nfev), "rms_px": float(np.sqrt(2.0 * res.cost / dof)), "n_residuals": ref.n_valid}
+    )
+    return o, d, std, info
+
+
+def _recover_piecewise(
+    obs: Observations,
+    tau: np.ndarray,
+    rates: Mapping[int, float],
+    kernel_frames: float,
+    *,
+    drift: bool,
+    **opts: Any,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """:func:`_recover` for a long recording: first segment, windows over the whole, refinement on those.
+
+    1. The full pairwise search on every camera's first ``SEGMENT_S`` local seconds (at least three
+       times ``max_offset_s``) gives first offsets (no drift).
+    2. ``N_WINDOWS`` windows of ``WINDOW_S`` seconds, evenly spread over the time every camera records
+       (placed by the first offsets): in each, every camera pair's shift is searched around its
+       prediction (``+-`` :data:`_SEARCH_S` plus :data:`_SEARCH_PER_S` per second elapsed); all shifts
+       give offsets and drifts by a Huber fit (:func:`_fuse_clocks`).
+    3. The joint refinement of :func:`_recover` on the windows' images together, from that fit.
+    """
+    cam = np.asarray(obs.cam_id)
+    cams = np.unique(cam)
+    first = np.zeros(cam.shape[0])
+    for c in cams:
+        first[cam == c] = tau[cam == c].min()
+    max_offset_s = opts["max_offset_s"]
+    seg_s = SEGMENT_S if max_offset_s is None else max(SEGMENT_S, 3.0 * float(max_offset_s))
+    seg = np.flatnonzero(tau - first <= seg_s)
+    o0, _, _, seg_info = _recover(
+        _streams(obs, tau, rates, kernel_frames, seg), **{**opts, "drift": False, "refine": True}
+    )
+    pos = np.searchsorted(cams, cam)
+    t = o0[pos] + tau  # first placement in time
+    start = max(float(t[cam == c].min()) for c in cams)
+    end = min(float(t[cam == c].max()) for c in cams)
+    period = opts["period"]
+    starts = np.linspace(start, max(end - WINDOW_S, start), N_WINDOWS)
+    eqs: list[tuple[int, int, float, float, float]] = []
+    wins: list[np.ndarray] = []
+    win_info = []
+    for t0 in starts:
+        search = _SEARCH_S + _SEARCH_PER_S * float(t0 - start)
+        margin = search + 3.0 * period
+        idx = np.flatnonzero((t >= t0 - margin) & (t <= t0 + WINDOW_S + margin))
+        try:
+            ws = _streams(obs, tau, rates, kernel_frames, idx)
+        except GttNetError as exc:  # a camera with too few frames here
+            log.debug("clock window at %.1f s skipped (%s)", t0, exc)
+            continue
+        if len(ws) != cams.size:
+            continue
+        wins.append(idx)
+        for i in range(cams.size):
+            for j in range(i + 1, cams.size):
+                try:
+                    delta, score, ratio = pair_offset(
+                        ws[i], ws[j], cap=opts["cap"], max_offset_s=search, around_s=float(o0[i] - o0[j])
+                    )
+                except GttNetError:
+                    continue
+                eqs.append((i, j, float(np.median(ws[i].tau)), delta, score))
+                win_info.append(
+                    {"start_s": float(t0), "cameras": [int(cams[i]), int(cams[j])], "shift_s": delta,
+                     "score": score, "peak_ratio": ratio}
+                )  # fmt: skip
+    if not eqs:
+        raise GttNetError("clock recovery: no window of the recording is seen by two cameras")
+    o, d = _fuse_clocks(cams.size, eqs, scale=period, drift=drift)
+    union = np.unique(np.concatenate(wins))
+    o, d, std, info = _recover(
+        _streams(obs, tau, rates, kernel_frames, union), drift=drift, init=(o, d), **opts
+    )
+    info["pairs"] = seg_info.get("pairs", [])
+    info["piecewise"] = {
+        "segment_s": seg_s,
+        "segment_images": int(seg.size),
+        "windows": len(wins),
+        "window_s": WINDOW_S,
+        "window_images": int(union.size),
+        "window_pairs": win_info,
+    }
+    return o, d, std, info
+
+
 def recover_clocks(
     obs: Observations,
     *,
@@ -346,6 +580,7 @@ def recover_clocks(
     cap_px: float = 15.0,
     f_scale_px: float = 3.0,
     refine: bool = True,
+    piecewise: bool | None = None,
 ) -> Clocks:
     """Recover every camera's clock from the 2-D joints alone (no timestamps are read).
 
@@ -367,6 +602,12 @@ def recover_clocks(
         f_scale_px: Scale of the soft-L1 loss of the joint refinement, pixels.
         kernel_frames: Width (standard deviation) of the temporal kernel that reads each stream, frames.
         refine: Run the joint refinement (else the fused pairwise offsets are returned, uncertainty NaN).
+        piecewise: Recover a long recording piecewise, in time linear in its length (see the module
+            docstring): the full offset search on each camera's first :data:`SEGMENT_S` seconds (or three
+            times ``max_offset_s`` when that is longer), then offsets and drift from :data:`N_WINDOWS`
+            windows spread over the whole recording. None: when the longest stream spans more than
+            :data:`PIECEWISE_FROM_S`. Offsets must then be found in the first segment (cameras started
+            within about half of it of each other).
 
     Returns:
         :class:`~gttnet.sync.clocks.Clocks` for every camera in ``obs``.
@@ -383,87 +624,36 @@ def recover_clocks(
             ts = np.sort(tau[obs.cam_id == c])
             if ts.size > 1 and np.median(np.diff(ts)) > 0:
                 rates[c] = float(1.0 / np.median(np.diff(ts)))
-    streams = _streams(obs, tau, rates, kernel_frames)
-    v = len(streams)
-    if v < 2:
-        raise GttNetError(f"clock recovery needs at least two cameras, input has {v}")
+    cam = np.asarray(obs.cam_id)
+    cams = np.unique(cam)
+    if cams.size < 2:
+        raise GttNetError(f"clock recovery needs at least two cameras, input has {cams.size}")
     f_px = float(np.median(obs.K[:, 0, 0]))
-    cap = cap_px / f_px
-    # Pairwise search, then fusion over the camera graph.
-    pairs, pair_info = [], []
-    for i in range(v):
-        for j in range(i + 1, v):
-            delta, score, ratio = pair_offset(streams[i], streams[j], cap=cap, max_offset_s=max_offset_s)
-            pairs.append((i, j, delta, score))  # o_i + tau_i = o_j + tau_i + delta: o_i - o_j = delta
-            pair_info.append(
-                {
-                    "cameras": [streams[i].camera, streams[j].camera],
-                    "shift_s": delta,
-                    "score": score,
-                    "peak_ratio": ratio,
-                }
-            )
-    period = 1.0 / max(rates.values())
-    o = _fuse_offsets(v, pairs, scale=period)
-    span = max(float(s.tau[-1] - s.tau[0]) for s in streams)
-    drift = span > 30.0 if estimate_drift is None else bool(estimate_drift)
-    d = np.zeros(v)
-    std = np.full(v, np.nan)
-    info: dict = {"front_end": "epipolar", "pairs": pair_info, "estimate_drift": drift, "refined": refine}
-    if refine:
-        ref = _Refiner(streams, f_px, drift)
-        p0 = np.concatenate([o[1:], np.zeros(v - 1)]) if drift else o[1:].copy()
-        steps = np.concatenate([np.full(v - 1, 0.05 * period), np.full(v - 1 if drift else 0, 2.0)])
-        cache: dict = {}
-
-        def fun(p):
-            key = p.tobytes()
-            if key not in cache:
-                cache.clear()
-                cache[key] = ref.residuals(p)
-            return cache[key]
-
-        def jac(p):
-            f0 = fun(p)
-            cam = [1 + q % (v - 1) for q in range(p.size)]  # parameter q moves camera cam[q]'s clock
-            cols = [
-                (ref.residuals(p + steps[q] * np.eye(p.size)[q], only=cam[q], base=f0) - f0) / steps[q]
-                for q in range(p.size)
-            ]
-            return np.stack(cols, axis=1)
-
-        x_scale = np.concatenate([np.full(v - 1, period), np.full(v - 1 if drift else 0, 100.0)])
-        res = least_squares(
-            fun, p0, jac=jac, loss="soft_l1", f_scale=f_scale_px, x_scale=x_scale, max_nfev=50
-        )
-        o, d = ref.unpack(res.x)
-        ref.residuals(res.x)
-        dof = max(ref.n_valid - res.x.size, 1)
-        J = res.jac
-        try:
-            cov = np.linalg.inv(J.T @ J) * (2.0 * res.cost / dof)
-        except np.linalg.LinAlgError:
-            cov = np.full((res.x.size, res.x.size), np.nan)
-        # Joints of one image share its timing error: count images, not joints, as independent samples.
-        cov *= obs.n_joints
-        full = np.zeros((v, v))
-        full[1:, 1:] = cov[: v - 1, : v - 1]
-        centre = np.eye(v) - 1.0 / v
-        std = np.sqrt(np.clip(np.diag(centre @ full @ centre.T), 0.0, None))
-        info.update(
-            {
-                "nfev": int(res.nfev),
-                "rms_px": float(np.sqrt(2.0 * res.cost / dof)),
-                "n_residuals": ref.n_valid,
-            }
-        )
+    opts: dict[str, Any] = {
+        "f_px": f_px,
+        "cap": cap_px / f_px,
+        "max_offset_s": max_offset_s,
+        "f_scale_px": f_scale_px,
+        "refine": refine,
+        "period": 1.0 / max(rates.values()),
+        "n_joints": obs.n_joints,
+    }
+    first = np.array([tau[cam == c].min() for c in cams])
+    span = max(float(tau[cam == c].max() - f) for c, f in zip(cams, first, strict=True))
+    drift = bool(span > 30.0) if estimate_drift is None else bool(estimate_drift)
+    if piecewise is None:
+        piecewise = bool(span > PIECEWISE_FROM_S)
+    if piecewise:
+        o, d, std, info = _recover_piecewise(obs, tau, rates, kernel_frames, drift=drift, **opts)
+    else:
+        streams = _streams(obs, tau, rates, kernel_frames)
+        o, d, std, info = _recover(streams, drift=drift, **opts)
     # Gauges: mean drift 0 (time rescaled), time 0 at the earliest first frame.
     m = 1e-6 * float(d.mean())
     o = o / (1.0 + m)
     d = ((1.0 + 1e-6 * d) / (1.0 + m) - 1.0) * 1e6
-    first = np.array([o[k] + (1.0 + 1e-6 * d[k]) * streams[k].tau[0] for k in range(v)])
-    o = o - first.min()
-    cams = np.array([s.camera for s in streams])
+    start = o + (1.0 + 1e-6 * d) * first
+    o = o - start.min()
     log.info("clocks: offsets %s s", np.array2string(o, precision=4))
     return Clocks(
         cameras=cams,
