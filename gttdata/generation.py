@@ -301,6 +301,7 @@ def generate_dataset(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    counts: dict[str, int] | None = None,
 ) -> Manifest | None:
     """Generate the shards of ``recipe`` into ``recipe.output_dir``, then write its manifest.
 
@@ -320,6 +321,8 @@ def generate_dataset(
         overwrite: Delete the dataset files in range first (all shards and the manifest without
             ``shard_range``). Without ``resume`` or ``overwrite``, existing files in range are refused.
         progress: Show a tqdm progress bar (samples/s, images/s, ETA) on stderr.
+        counts: When given, filled with ``samples_written`` and ``samples_kept`` (in range, kept by
+            ``resume`` because they verified), so a report never calls verified samples generated.
 
     Returns:
         The written and verified manifest, or None when blocks outside ``shard_range`` are still
@@ -339,7 +342,7 @@ def generate_dataset(
     selected = [blocks[i] for i in parse_shard_range(shard_range, len(blocks))]
     with OutputLock(out_dir, "gttdata generate", shared=shard_range is not None):
         return _generate_locked(
-            recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress
+            recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress, counts
         )
 
 
@@ -356,7 +359,9 @@ def _existing_files(out_dir: Path, selected: list[BlockPlan], whole: bool) -> li
     return found
 
 
-def _generate_locked(recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress):
+def _generate_locked(
+    recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress, counts=None
+):
     whole = len(selected) == len(blocks)
     existing = _existing_files(out_dir, selected, whole)
     check_output(out_dir, exists=bool(existing), resume=resume, overwrite=overwrite, what="a dataset")
@@ -377,7 +382,10 @@ def _generate_locked(recipe, out_dir, blocks, selected, workers, shard_range, re
     _log.info(
         "%s: %d blocks in range, %d to write with %d workers", recipe.name, len(selected), len(todo), workers
     )
-    bar = _Bar(sum(p.n_samples for p in todo), progress, recipe.name)
+    n_todo = sum(p.n_samples for p in todo)
+    if counts is not None:
+        counts.update(samples_written=n_todo, samples_kept=sum(p.n_samples for p in selected) - n_todo)
+    bar = _Bar(n_todo, progress, recipe.name)
     try:
         _run_blocks(recipe, todo, out_dir, attrs, workers, bar)
     finally:

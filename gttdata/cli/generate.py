@@ -127,6 +127,7 @@ def generate_cmd(
         f"({workers} worker{'s' if workers > 1 else ''}{', resume' if resume else ''})"
     )
     t0 = time.perf_counter()
+    counts: dict[str, int] = {}
     manifest = generate_dataset(
         recipe,
         workers=workers,
@@ -134,6 +135,7 @@ def generate_cmd(
         resume=resume,
         overwrite=overwrite,
         progress=progress,
+        counts=counts,
     )
     seconds = time.perf_counter() - t0
     if manifest is None:
@@ -150,10 +152,16 @@ def generate_cmd(
     for line in format_summary(manifest):
         echo(line)
     total = manifest.statistics
-    images_per_s = total.get("n_images", 0) * n / max(manifest.n_samples(), 1) / seconds
+    n_written, kept = counts.get("samples_written", n), counts.get("samples_kept", 0)
+    images_per_s = total.get("n_images", 0) * n_written / max(manifest.n_samples(), 1) / seconds
     root = Path(recipe.output_dir)
+    rate = (
+        f"{n_written / seconds:.1f} samples/s, {images_per_s:.0f} images/s"
+        if n_written
+        else "nothing to write"
+    )
     echo(
-        f"{seconds:.1f} s: {n / seconds:.1f} samples/s, {images_per_s:.0f} images/s; "
+        f"{seconds:.1f} s: {rate}{f'; {kept} samples kept (they verify)' if kept else ''}; "
         f"manifest {root / 'manifest.json'} verified"
     )
     registered = register_manifest(manifest, repo_manifests_dir(), location=root) if register_ else None
@@ -163,9 +171,10 @@ def generate_cmd(
     if as_json:
         report = {
             **dataset_summary(manifest, root),
-            "samples_written": n,
+            "samples_written": n_written,
+            "samples_kept": kept,
             "seconds": round(seconds, 3),
-            "samples_per_s": round(n / seconds, 3),
+            "samples_per_s": round(n_written / seconds, 3),
             "images_per_s": round(images_per_s, 1),
             "manifest": str(root / "manifest.json"),
             "registered": None if registered is None else str(registered),

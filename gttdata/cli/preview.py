@@ -40,7 +40,10 @@ def _check_3d() -> bool:
 )
 @click.option("--variant", default="orig", show_default=True, help="Input variant to show.")
 @click.option(
-    "--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory."
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Output directory [default: DIR/preview, or preview/<shard name> beside a SHARD].",
 )
 @click.option("--video", is_flag=True, help="Also write an MP4 of each sample in global time order.")
 @click.option("--no-3d", "no_3d", is_flag=True, help="Skip the pyrender 3-D views.")

@@ -71,6 +71,13 @@ def test_inspect_and_generate_json(reference, tmp_path):
     assert shard["split"] == "test" and arrays["points3d"]["shape"] == [24, 31, 3]
     gen = json.loads(_run("generate", TINY, "--out", str(tmp_path), "--no-progress", "--json").output)
     assert gen["splits"] == data["splits"] and gen["samples_written"] == 8 and gen["seconds"] > 0
+    (tmp_path / "val/shard-00000.h5").unlink()  # a resume keeps 6 samples that verify and writes 2
+    again = json.loads(
+        _run("generate", TINY, "--out", str(tmp_path), "--resume", "--no-progress", "--json").output
+    )
+    assert (again["samples_written"], again["samples_kept"]) == (2, 6)
+    text = _run("generate", TINY, "--out", str(tmp_path), "--resume", "--no-progress").output
+    assert "nothing to write; 8 samples kept (they verify)" in text and "samples/s" not in text
     bad = _run("inspect", str(reference / "test/shard-00000.h5"), "--sample", "9", ok=False)
     assert bad.exit_code == 2 and "holds samples 0-1, got 9" in bad.output
 
