@@ -122,3 +122,18 @@ def test_sweep_figure_matches_its_table(condition, tmp_path):
         if r["status"] == "ok" and r["mpjpe_mm"]:
             cells.setdefault((r["value"], r["sequencing"], r["method"]), []).append(float(r["mpjpe_mm"]))
     assert cells and all(mean_interval(np.array(v), recipe.error_bars)[0] >= 0 for v in cells.values())
+
+
+def test_training_curves_match_their_log(tmp_path):
+    """The committed learning-curve figure is plot_learning_curves of the committed run log."""
+    pytest.importorskip("matplotlib")
+    from gttnet.train.curves import plot_learning_curves, read_history
+
+    (tmp_path / "log.jsonl").write_bytes((FIGURES / "training_curves_cpu.jsonl").read_bytes())
+    history = read_history(tmp_path)
+    assert {r["stage"] for r in history} == {"bootstrap_affinity", "dloe"}
+    made = plot_learning_curves(
+        history, tmp_path / "curves.png", title="default recipe, 400 + 200 steps on the CPU"
+    )
+    assert made is not None
+    assert_images_match(made, FIGURES / "training_curves_cpu.png")
