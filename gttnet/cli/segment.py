@@ -16,6 +16,9 @@ __all__ = ["register", "segment_cmd", "load_capture"]
 
 log = logging.getLogger(__name__)
 
+#: The files ``segment`` writes into ``--out``.
+OUT_FILES = ("labels.csv", "segmentation.json", "affinity.png")
+
 
 def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
     """The stored capture ``sample`` of a generate recipe (built in memory), a shard file or a dataset dir.
@@ -80,10 +83,17 @@ def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
     type=click.Path(file_okay=False),
     default="runs/segment",
     show_default=True,
-    help="Folder of labels.csv, segmentation.json and affinity.png (files in it are replaced).",
+    help="Folder of labels.csv, segmentation.json and affinity.png; refused if it holds them, unless "
+    "--overwrite.",
+)
+@click.option("--overwrite", is_flag=True, help="Replace the segmentation already in --out.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the report (segmentation.json) as one JSON line."
 )
 @friendly_errors
-def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_path, out_dir):
+def segment_cmd(
+    input_path, method, sample, split, sequencing, n_events, model_path, out_dir, overwrite, as_json
+):
     """Segment the temporally disjoint events of INPUT and recover each event's image order.
 
     INPUT is a gttdata generate recipe (.yaml, built in memory, e.g. recipes/gttdata/events.yaml), a
@@ -99,9 +109,16 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
     import numpy as np
 
     from gttdata.capture.views import make_view
+    from gttdata.fileio import atomic_write, check_output
     from gttnet.apps.segment import score_segmentation, segment_capture
     from gttnet.evaluate.plots import plot_affinity
 
+    out = Path(out_dir)
+    files = [out / name for name in OUT_FILES]
+    check_output(
+        out, exists=any(f.exists() for f in files), resume=False, overwrite=overwrite,
+        what="a segmentation", resumable=False,
+    )  # fmt: skip
     cap = load_capture(input_path, sample=sample, split=split)
     obs, gt = make_view(cap, sequencing)
     if model_path is not None and method != "gttnet":
@@ -111,11 +128,10 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
         rec, seg = segment_capture(obs, method=method, n_events=n_events, **options)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     truth = cap.meta.get("event_id")
     event = np.asarray(truth)[gt.perm] if truth is not None else None
-    with (out / "labels.csv").open("w", newline="") as f:
+    with atomic_write(out / "labels.csv", "w") as f:
         w = csv.writer(f)
         w.writerow(["image", "stored_index", "camera", "event", "order_in_event", "true_event"])
         for i in range(obs.n_images):
@@ -133,11 +149,15 @@ def segment_cmd(input_path, method, sample, split, sequencing, n_events, model_p
     }
     if event is not None:
         report.update(score_segmentation(seg, event, gt.global_order))
-    (out / "segmentation.json").write_text(json.dumps(report, indent=2) + "\n")
+    with atomic_write(out / "segmentation.json", "w") as f:
+        f.write(json.dumps(report, indent=2) + "\n")
     plot_affinity(
         rec.affinity, seg.labels, seg.order, out / "affinity.png", title=f"{method}: {seg.n_events} events"
     )
-    click.echo(" ".join(f"{k}={v}" for k, v in report.items() if k != "input") + f" -> {out}")
+    if as_json:
+        click.echo(json.dumps({**report, "out": str(out)}))
+    else:
+        click.echo(" ".join(f"{k}={v}" for k, v in report.items() if k != "input") + f" -> {out}")
 
 
 def register(main: click.Group) -> None:

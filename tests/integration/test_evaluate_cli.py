@@ -87,6 +87,14 @@ def test_segment_cli(tmp_path):
     lines = (tmp_path / "seg" / "labels.csv").read_text().splitlines()
     assert lines[0].startswith("image,stored_index,camera,event,order_in_event") and len(lines) == 81
     assert (tmp_path / "seg" / "affinity.png").stat().st_size > 1000
+    again = _run("segment", recipe, "--sample", 0, "--out", tmp_path / "seg")  # refused before any work
+    assert again.exit_code == 1 and "already holds a segmentation; pass --overwrite" in again.output
+    assert json.loads((tmp_path / "seg" / "segmentation.json").read_text()) == report
+    res = _run("segment", recipe, "--sample", 0, "--out", tmp_path / "seg", "--overwrite", "--json")
+    assert res.exit_code == 0, res.output
+    printed = json.loads(res.output)  # the report again (its timing aside), and where it went
+    assert printed.pop("out") == str(tmp_path / "seg") and printed.pop("seconds") > 0
+    assert printed == {k: v for k, v in report.items() if k != "seconds"}
 
 
 def test_reconstruct_two_subjects(tmp_path):
