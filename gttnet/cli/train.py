@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import warnings
@@ -37,8 +38,13 @@ __all__ = ["register", "train_command"]
 @click.option("--max-steps", type=int, default=None, help="Stop (with a checkpoint) after this many steps.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the result lines (implies --no-progress).")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print one JSON object (run folder, status, validation) instead."
+)
 @friendly_errors
-def train_command(recipe, overrides, resume, out, device, max_steps, progress, quiet, overwrite) -> None:
+def train_command(
+    recipe, overrides, resume, out, device, max_steps, progress, quiet, overwrite, as_json
+) -> None:
     """Train GTT-Net with RECIPE (recipes/gttnet/*.yaml) and key.sub=value OVERRIDES.
 
     The run folder is --out, else the recipe's output_dir (runs/<name> when it has none). An existing
@@ -57,7 +63,8 @@ def train_command(recipe, overrides, resume, out, device, max_steps, progress, q
 
     if not logging.getLogger().handlers:
         logging.basicConfig(
-            level=logging.WARNING if quiet else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+            level=logging.WARNING if quiet or as_json else logging.INFO,
+            format="%(levelname)s %(name)s: %(message)s",
         )
     recipe, out = _old_resume_form(recipe, overrides, resume, out)
     if recipe is None and not resume:
@@ -81,13 +88,28 @@ def train_command(recipe, overrides, resume, out, device, max_steps, progress, q
             resume=resume,
             overwrite=overwrite,
             max_steps=max_steps,
-            progress=progress and not quiet,
+            progress=progress and not (quiet or as_json),
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     if int(os.environ.get("RANK", "0")) != 0:
         return  # under torchrun only rank 0 reports
     val = next((r for r in reversed(result.state.history) if r["kind"] == "val"), None)
+    if as_json:
+        click.echo(
+            json.dumps(
+                {
+                    "run_dir": str(result.run_dir),
+                    "finished": result.finished,
+                    "global_step": result.state.global_step,
+                    "val_loss": None if val is None else val["loss"],
+                    "val_mpjpe_mm": None if val is None else val["mpjpe_mm"],
+                    "val_mpjpe_init_mm": None if val is None else val["mpjpe_init_mm"],
+                    "model": str(result.run_dir / "model.pt") if result.finished else None,
+                }
+            )
+        )
+        return
     status = (
         "finished"
         if result.finished

@@ -34,8 +34,11 @@ def test_train_tiny_then_resume_is_a_no_op(tmp_path, in_repo):
     assert {"loss_structure", "loss_affinity", "loss_autoencoding"} <= set(train[-1])
     for f in ("model.pt", "model.json", "loss_curve.png", "checkpoint.pt", "recipe.yaml"):
         assert (run / f).is_file(), f
-    again = CliRunner().invoke(main, ["train", "--out", str(run), "--resume", "--quiet"])
+    again = CliRunner().invoke(main, ["train", "--out", str(run), "--resume", "--json"])
     assert again.exit_code == 0, again.output
+    report = json.loads(again.stdout)  # one JSON object, nothing else on stdout
+    assert report["run_dir"] == str(run) and report["finished"] and report["global_step"] == 4
+    assert report["model"] == str(run / "model.pt") and math.isfinite(report["val_mpjpe_mm"])
     assert "warning" not in again.output  # the saved recipe names output_dir, not the old out_dir
 
 
