@@ -98,6 +98,20 @@ def test_sparse_fiedler_matches_dense_on_a_large_chain(monkeypatch):
     assert sparse.tolist() == truth.tolist() or sparse.tolist() == (n - 1 - truth).tolist()
 
 
+def test_graph_held_by_negligible_links_is_still_ordered():
+    """Outlying poses linked by ~1e-50 weights: numerically split, Lanczos fails; the dense solver takes over."""
+    g = np.random.default_rng(1)
+    X = np.cumsum(g.normal(size=(600, 2, 3)), 0) * 0.05
+    s = np.median(np.linalg.norm(np.diff(X.reshape(600, -1), axis=0), axis=1))
+    far = X[g.integers(0, 600, 20)] + 15.0 * s * g.normal(size=(20, 2, 3)) / np.sqrt(6)
+    A = pose_graph_affinity(np.concatenate([X, far]), k=16, sparse=True)
+    assert graph_components(A).max() == 0  # one component, to the exact arithmetic
+    order = spectral_order(A)
+    assert sorted(order.tolist()) == list(range(620))
+    truth = np.arange(600)
+    assert abs(kendall_tau(order[:600], truth)) > 0.9  # the walk itself is still in order
+
+
 def test_sparse_matrix_input_gives_the_dense_order():
     """A SciPy sparse affinity (GTT-Net's neighbourhood graph) is ordered exactly as its dense form."""
     from scipy.sparse import csr_matrix
