@@ -1,10 +1,12 @@
 """Benchmark of reconstruction cost against recording length: seconds and peak memory, 300 to 72,000 images.
 
-Run:  python benchmarks/bench_scaling.py [--sizes 300 1440 7200 24000 72000] [--runs 3] [--data DIR]
+Run:  python benchmarks/bench_scaling.py [--sizes 300 1440 7200 24000 72000] [--runs 3] [--data DIR] [--drift-ppm X]
 
 Data: ``recipes/gttdata/long.yaml`` (4 cameras at 30 Hz, one dancer inside the ring) with the capture
 window set to ``size / 120`` seconds, generated once per size into ``--data`` (default
-``/tmp/gtt-bench-scaling``, reused when present). Each configuration runs ``gttnet reconstruct`` end to
+``/tmp/gtt-bench-scaling``, reused when present); ``--drift-ppm X`` draws every camera's clock
+``uniform(-X, X)`` ppm off and starts the cameras up to 1 s apart at random sub-frame offsets, so the
+windows must follow clocks recovered over the whole recording. Each configuration runs ``gttnet reconstruct`` end to
 end in a fresh process (start-up, loading, reconstruction, report; ``--sequencing partial``):
 
 * ``gttnet windowed``: GTT-Net window by window (``--window auto``: one piece up to 2,000 images);
@@ -46,9 +48,10 @@ def _env() -> dict:
     return env
 
 
-def make_shard(size: int, root: Path) -> Path:
-    """Generate (once) the long recipe cut to ``size`` images; returns the shard path."""
-    out = root / f"long_{size}"
+def make_shard(size: int, root: Path, drift_ppm: float = 0.0) -> Path:
+    """Generate (once) the long recipe cut to ``size`` images (clocks drifting by up to ``drift_ppm``)."""
+    name = f"long_{size}" + (f"_drift{drift_ppm:g}" if drift_ppm else "")
+    out = root / name
     shard = out / "test" / "shard-00000.h5"
     if shard.is_file() and (out / "manifest.json").is_file():
         return shard
@@ -61,7 +64,16 @@ def make_shard(size: int, root: Path) -> Path:
         str(RECIPE),
         f"capture.window_s={window}",
         f"splits.0.sources.0.duration_s={window + 1.0}",
-        f"name=long_{size}",
+        f"name={name}",
+        *(
+            [
+                f"capture.drift_ppm={{uniform: [{-drift_ppm}, {drift_ppm}]}}",
+                "capture.start_spread_s=1.0",
+                "capture.stagger=random",
+            ]
+            if drift_ppm
+            else []
+        ),
         "--out",
         str(out),
         "--no-progress",
@@ -91,10 +103,11 @@ def main() -> None:
     p.add_argument("--max-whole", type=int, default=3600, help="Largest size run in one piece.")
     p.add_argument("--configs", default=",".join(CONFIGS))
     p.add_argument("--data", type=Path, default=Path("/tmp/gtt-bench-scaling"))
+    p.add_argument("--drift-ppm", type=float, default=0.0, help="Clock drift of the cameras, +- ppm.")
     args = p.parse_args()
     rows = []
     for size in args.sizes:
-        shard = make_shard(size, args.data)
+        shard = make_shard(size, args.data, args.drift_ppm)
         for name in args.configs.split(","):
             if name == "gttnet whole" and size > args.max_whole:
                 continue
@@ -123,7 +136,10 @@ def main() -> None:
     for size, name, walls, *_ in rows:
         base.setdefault(name, statistics.median(walls) / size)
     whole = {size: statistics.median(w) for size, name, w, *_ in rows if name == "gttnet whole"}
-    print(f"\n`gttnet reconstruct --sequencing partial` end to end, {args.runs} runs each; median (min..max)")
+    drift = f", clocks drifting up to +-{args.drift_ppm:g} ppm" if args.drift_ppm else ""
+    print(
+        f"\n`gttnet reconstruct --sequencing partial` end to end{drift}, {args.runs} runs each; median (min..max)"
+    )
     print(
         "| images | config | windows | wall s | CPU s | peak RSS MB | us/image | per-image vs smallest | whole / windowed | MPJPE mm |"
     )
