@@ -10,6 +10,7 @@ from scipy.sparse import csr_matrix, issparse
 from scipy.sparse.csgraph import connected_components
 
 __all__ = [
+    "NEGLIGIBLE_LINK",
     "graph_components",
     "normalised_laplacian",
     "pose_graph_affinity",
@@ -78,6 +79,10 @@ def graph_components(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndar
     return out
 
 
+#: Links of the symmetrised affinity at most this fraction of the largest degree are ignored when
+#: :func:`spectral_order` splits components (a pose graph can hold weights of 1e-230 to far poses).
+NEGLIGIBLE_LINK = 1e-12
+
 #: Components larger than this, with at most this share of non-zero affinities, take the sparse solver.
 _SPARSE_MIN_NODES = 400
 _SPARSE_MAX_DENSITY = 0.05
@@ -136,7 +141,9 @@ def spectral_order(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndarra
     ordered by sorting the Fiedler vector of its own combinatorial Laplacian ``L = diag(A 1) - A``.
     The Fiedler vector's sign is arbitrary; it is fixed so that the order correlates non-negatively with
     the image index, ties broken by putting the lowest index first (deterministic; under full sequencing
-    the natural direction).
+    the natural direction). Links lighter than :data:`NEGLIGIBLE_LINK` times the largest degree do not
+    join components: the Laplacian cannot tell them from zero (its smallest eigenvalues become a
+    numerically degenerate cluster, whose "Fiedler vector" is any mix of the parts).
 
     Args:
         A: Non-negative affinity, shape ``(N, N)``: a dense array or a SciPy sparse matrix (the same
@@ -155,7 +162,8 @@ def spectral_order(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndarra
     """
     S = _symmetric_affinity(A)
     n = S.shape[0]
-    labels = graph_components(S, tol=tol)
+    deg_max = float(np.max(S.sum(axis=1))) if n else 0.0
+    labels = graph_components(S, tol=max(tol, NEGLIGIBLE_LINK * deg_max))
     sequence: list[np.ndarray] = []
     for c in range(int(labels.max()) + 1 if n else 0):
         idx = np.flatnonzero(labels == c)
