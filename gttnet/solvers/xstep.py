@@ -60,6 +60,17 @@ def laplacians(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return L_out, L_sym
 
 
+def _structure_diagonal(A: torch.Tensor, lambda1: float) -> torch.Tensor:
+    """``diag(M)`` of :func:`_structure_matrix` without forming the ``N x N`` Laplacians, shape ``(..., N)``.
+
+    Column m of ``L_out = diag(d) - A`` (``d = A 1``) has squared norm ``d_m^2 - 2 d_m A_mm + sum_n A_nm^2``;
+    ``diag(L_sym) = d + A^T 1 - 2 diag(A)``.
+    """
+    d = A.sum(-1)
+    a = torch.diagonal(A, dim1=-2, dim2=-1)
+    return d * d - 2.0 * d * a + A.square().sum(-2) + lambda1 * (d + A.sum(-2) - 2.0 * a)
+
+
 def _structure_matrix(A: torch.Tensor, lambda1: float) -> torch.Tensor:
     """``M = L_out^T L_out + lambda1 L_sym``: the Laplacian part of the objective, per coordinate."""
     L_out, L_sym = laplacians(A)
@@ -202,17 +213,14 @@ def _solve(
     if method == "auto":
         needs_geom_grad = torch.is_grad_enabled() and (r.requires_grad or C.requires_grad)
         sparse_ok = A3.device.type == "cpu" and n >= SPARSE_FROM_N and not needs_geom_grad
-        sparse_ok = sparse_ok and float((A3.detach() != 0).double().mean()) <= SPARSE_MAX_DENSITY
+        sparse_ok = sparse_ok and int(torch.count_nonzero(A3.detach())) <= SPARSE_MAX_DENSITY * A3.numel()
         method = "sparse" if sparse_ok else "dense"
     if method == "sparse" and torch.is_grad_enabled() and (r.requires_grad or C.requires_grad):
         raise ValueError("method 'sparse' differentiates w.r.t. A only; use method='dense' for ray gradients")
     eps = None
     if xp is not None:
-        with (
-            torch.no_grad()
-        ):  # diag(M) = column sums of L_out^2 + lambda1 diag(L_sym); a constant in backward
-            L_out, L_sym = laplacians(A3)
-            diag = L_out.square().sum(-2) + lambda1 * torch.diagonal(L_sym, dim1=-2, dim2=-1)
+        with torch.no_grad():  # a constant in backward
+            diag = _structure_diagonal(A3, lambda1)
             eps = prior_weight * (diag.mean(-1) + 1e-12)
     sys = build_system(C, r, vis, lambda2=lambda2, x_prior=xp, eps=eps)
     X = (

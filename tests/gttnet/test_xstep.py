@@ -280,3 +280,12 @@ def test_cuda_matches_cpu(lambda2):
     if lambda2 is None:  # float32 cannot resolve a 1e6 ray weight against O(1) Laplacian terms
         X32 = solve_structure(A.float().cuda(), C, r, vis, lambda2=lambda2)
         torch.testing.assert_close(X32.double().cpu(), X_cpu, rtol=0, atol=1e-3)
+
+
+def test_structure_diagonal_is_the_diagonal_of_the_structure_matrix():
+    from gttnet.solvers.xstep import _structure_diagonal, _structure_matrix
+
+    A = torch.rand(2, 7, 7, dtype=torch.float64) * (torch.rand(2, 7, 7, dtype=torch.float64) > 0.5)
+    A[0, 2, 2] = 0.4  # a non-zero diagonal is covered too
+    ref = torch.diagonal(_structure_matrix(A, 0.1), dim1=-2, dim2=-1)
+    torch.testing.assert_close(_structure_diagonal(A, 0.1), ref, rtol=1e-12, atol=1e-12)
