@@ -55,13 +55,15 @@ def test_train_stop_and_resume(tmp_path, in_repo):
 def test_old_resume_folder_form_still_works_with_a_warning(tmp_path, in_repo):
     """``--resume RUN_DIR`` (before --resume became a flag) is read as ``--out RUN_DIR --resume``."""
     run = tmp_path / "run"
-    res = CliRunner().invoke(main, ["train", TINY, "--out", str(run), "--max-steps", "5", "--quiet"])
-    assert res.exit_code == 0 and "stopped at step 5" in res.output, res.output
+    run.mkdir()  # no checkpoint: the form is read as --out RUN --resume, which then names what is missing
     res = CliRunner().invoke(main, ["train", "--resume", str(run), "--quiet"])
-    assert res.exit_code == 0 and "finished" in res.output, res.output
-    assert f"warning: gttnet train --resume {run} is deprecated; use: gttnet train --out {run} --resume" in (
-        res.output
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    warning, error = res.output.splitlines()
+    assert (
+        warning
+        == f"warning: gttnet train --resume {run} is deprecated; use: gttnet train --out {run} --resume"
     )
+    assert error == f"Error: {run / 'checkpoint.pt'}: no checkpoint to resume from"
 
 
 @pytest.mark.parametrize(
