@@ -24,6 +24,7 @@ from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
     "BUNDLED_MODEL",
+    "BUNDLED_NONE_MODEL",
     "BUNDLED_POINTNET_MODEL",
     "bundled_model_for",
     "MODEL_FORMAT",
@@ -37,16 +38,23 @@ log = logging.getLogger(__name__)
 
 #: The model shipped with the package (written by the lead after training ``recipes/gttnet/default.yaml``).
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "assets" / "gttnet_default.pt"
+#: The CMU-31 model for captures without sequencing: the bundled model fine-tuned on order-free captures only
+#: (``recipes/gttnet/default_none.yaml``; docs/MODEL_CARD.md). Optional: without it ``none`` uses BUNDLED_MODEL.
+BUNDLED_NONE_MODEL = BUNDLED_MODEL.with_name("gttnet_default_none.pt")
 #: The cross-domain (PointNet) model for any other skeleton (``recipes/gttnet/pointnet.yaml``); it may be
 #: absent, when no trained model was good enough to ship (see docs/MODEL_CARD_POINTNET.md).
 BUNDLED_POINTNET_MODEL = BUNDLED_MODEL.with_name("gttnet_pointnet.pt")
 
 
-def bundled_model_for(skeleton) -> Path:
-    """The bundled model that fits a topology: the CMU-31 model for CMU-31, the PointNet model otherwise.
+def bundled_model_for(skeleton, sequencing: str | None = None) -> Path:
+    """The bundled model that fits a topology and sequencing condition.
+
+    CMU-31 input gets the CMU-31 model, its order-free specialist (:data:`BUNDLED_NONE_MODEL`) under
+    ``none`` sequencing when installed; any other skeleton gets the PointNet model.
 
     Args:
         skeleton: The input's :class:`gttdata.skeleton.Skeleton`.
+        sequencing: ``"none"``, ``"partial"``, ``"full"`` or None (condition unknown: the general model).
 
     Raises:
         ModelError: The fitting model is not installed (the message says how to get or pass one).
@@ -54,6 +62,8 @@ def bundled_model_for(skeleton) -> Path:
     from gttdata.skeleton import CMU31_JOINTS
 
     if skeleton.joint_names == CMU31_JOINTS:
+        if sequencing == "none" and BUNDLED_NONE_MODEL.is_file():
+            return BUNDLED_NONE_MODEL
         return BUNDLED_MODEL
     if not BUNDLED_POINTNET_MODEL.is_file():
         raise ModelError(
@@ -225,12 +235,13 @@ def reconstruct_gttnet(
 ) -> Reconstruction:
     """GTT-Net with a bundled model or a given model file.
 
-    The bundled model that fits the input's topology (:func:`bundled_model_for`: CMU-31 model for
-    CMU-31, the PointNet model otherwise), or the model file/run directory ``model``. ``lambda2`` and
+    The bundled model that fits the input's topology and sequencing (:func:`bundled_model_for`: for
+    CMU-31 the order-free specialist under ``none`` and the general CMU-31 model otherwise, the PointNet
+    model for other skeletons), or the model file/run directory ``model``. ``lambda2`` and
     ``top_q`` override the model's DLOE ray weight and test-time Q for this call (see
     :meth:`GTTNetReconstructor.__call__`); the cached model is not modified. ``candidates`` as in
     :class:`GTTNetReconstructor`.
     """
     if model is None:
-        model = str(bundled_model_for(obs.skeleton))
+        model = str(bundled_model_for(obs.skeleton, obs.sequencing))
     return cached_reconstructor(str(model), candidates)(obs, top_q=top_q, lambda2=lambda2)

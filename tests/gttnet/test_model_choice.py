@@ -62,3 +62,22 @@ def test_cli_gttnet_on_authors_17_joint_file(tmp_path, pointnet_bundle, coco_sam
     # --model overrides the choice: the CMU-31 model refuses 17 joints with one line.
     res = CliRunner().invoke(main, [*args, "--model", str(inference.BUNDLED_MODEL)])
     assert res.exit_code != 0 and "31 joints" in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("installed", [True, False])
+def test_cmu31_without_sequencing_uses_the_order_free_model_when_installed(installed, tmp_path, monkeypatch):
+    none_model = tmp_path / "gttnet_default_none.pt"
+    if installed:
+        none_model.write_bytes(b"x")  # only its presence is read here
+    monkeypatch.setattr(inference, "BUNDLED_NONE_MODEL", none_model)
+    expected = none_model if installed else inference.BUNDLED_MODEL
+    assert inference.bundled_model_for(cmu31(), "none") == expected
+    for sequencing in ("partial", "full", None):
+        assert inference.bundled_model_for(cmu31(), sequencing) == inference.BUNDLED_MODEL
+
+
+def test_shipped_order_free_model_verifies_and_fits_cmu31():
+    card = json.loads(inference.BUNDLED_NONE_MODEL.with_suffix(".json").read_text())
+    model = inference.load_model(inference.BUNDLED_NONE_MODEL)  # checks the card's sha256
+    assert model.config.n_joints == card["config"]["n_joints"] == 31
+    assert card["recipe"]["data"]["sequencing"] == {"none": 1.0}
