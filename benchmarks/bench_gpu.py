@@ -77,7 +77,9 @@ def main() -> None:
     for idx in range(args.n_seq):
         obs, gt = make_view(build_sample(recipe, "test", idx)[0], "none")
         if rec_model is None:
-            rec_model = GTTNetReconstructor(str(bundled_model_for(obs.skeleton)), device=args.device)
+            rec_model = GTTNetReconstructor(
+                str(bundled_model_for(obs.skeleton, obs.sequencing)), device=args.device
+            )
 
         def call(obs=obs, model=rec_model):
             return model(obs)  # what reconstruct(obs, "gttnet") runs, on this device
