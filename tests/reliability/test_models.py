@@ -32,10 +32,13 @@ def run_dir(tmp_path):
     return tmp_path
 
 
-def test_bundled_model_card_holds_its_checksum():
-    card = json.loads(inference.BUNDLED_MODEL.with_suffix(".json").read_text())
+@pytest.mark.parametrize("name", ["BUNDLED_MODEL", "BUNDLED_POINTNET_MODEL"])
+def test_bundled_model_card_holds_its_checksum(name):
+    path = getattr(inference, name)
+    card = json.loads(path.with_suffix(".json").read_text())
     assert len(card["sha256"]) == 64  # "file" may name the run's model.pt it was copied from
-    assert inference.load_model(None).config.n_joints == card["config"]["n_joints"]
+    config = inference.load_model(path).config  # checks size and sha256 against the card
+    assert config.n_joints == card["config"]["n_joints"] and config.pointnet == card["config"]["pointnet"]
 
 
 def test_bitflipped_model_is_refused(tmp_path):
