@@ -137,3 +137,26 @@ def test_training_curves_match_their_log(tmp_path):
     )
     assert made is not None
     assert_images_match(made, FIGURES / "training_curves_cpu.png")
+
+
+def test_sync_clocks_figure_matches_its_command(tmp_path):
+    """docs/figures/sync_clocks.png is what its documented command writes (clock recovery is deterministic)."""
+    pytest.importorskip("matplotlib")
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "sync_clocks.png"
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks/plot_sync_clocks.py"), "--out", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert res.returncode == 0, res.stderr
+    assert_images_match(out, FIGURES / "sync_clocks.png")
