@@ -293,19 +293,17 @@ def pose_graph_affinity(X: np.ndarray, *, k: int = 16, sparse: bool = False) -> 
         raise ValueError("pose_graph_affinity: X holds NaN or inf joints; fill them first")
     n = F.shape[0]
     k = min(int(k), n - 1)
-    if k < 1:
-        return csr_matrix((n, n)) if sparse else np.zeros((n, n))
-    dist, nbr = cKDTree(F).query(F, k=k + 1)
-    dist, nbr = dist[:, 1:], nbr[:, 1:]  # drop each image itself
-    s2 = float(np.median(dist**2))
-    w = np.exp(-(dist**2) / s2) if s2 > 0 else np.ones_like(dist)
-    rows = np.repeat(np.arange(n), k)
-    off = nbr.ravel() != rows  # an image listed among its own neighbours (duplicate poses): no self-link
-    if sparse:
-        return csr_matrix((w.ravel()[off], (rows[off], nbr.ravel()[off])), shape=(n, n))
-    A = np.zeros((n, n))
-    A[rows[off], nbr.ravel()[off]] = w.ravel()[off]
-    return A
+    A = csr_matrix((n, n))
+    if k >= 1:
+        dist, nbr = cKDTree(F).query(F, k=k + 1)
+        dist, nbr = dist[:, 1:], nbr[:, 1:]  # drop each image itself
+        s2 = float(np.median(dist**2))
+        w = np.exp(-(dist**2) / s2) if s2 > 0 else np.ones_like(dist)
+        rows = np.repeat(np.arange(n), k)
+        off = nbr.ravel() != rows  # an image listed among its own neighbours (duplicate poses): no self-link
+        # Each row's k neighbours are distinct, so no entry is summed twice.
+        A = csr_matrix((w.ravel()[off], (rows[off], nbr.ravel()[off])), shape=(n, n))
+    return A if sparse else A.toarray()
 
 
 def normalised_laplacian(S: np.ndarray) -> np.ndarray:
