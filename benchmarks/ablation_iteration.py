@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from gttdata.recipe import load_recipe  # noqa: E402
+from gttnet.baselines._rays import ray_residuals  # noqa: E402
 from gttnet.data import RecipeSource  # noqa: E402
 from gttnet.evaluate.metrics import mpjpe_mm  # noqa: E402
 from gttnet.geometry.neighbours import neighbourhoods  # noqa: E402
@@ -33,15 +34,23 @@ from gttnet.methods import reconstruct  # noqa: E402
 from gttnet.model.inference import GTTNetReconstructor, prepare_inputs  # noqa: E402
 
 
-def ray_cost(X: torch.Tensor, centers: torch.Tensor, rays: torch.Tensor, vis: torch.Tensor, cam: np.ndarray):
-    """Symmetrised mean distance of image j's rays from image i's poses, shape ``(N, N)`` (metres)."""
-    d = X[:, None, :, :] - centers[None, :, None, :]  # (N, N, J, 3): camera of j to joint of i
-    perp = (d - (d * rays[None]).sum(-1, keepdim=True) * rays[None]).norm(dim=-1)  # (N, N, J)
-    m = vis[None].double()
-    c = (perp * m).sum(-1) / m.sum(-1).clamp(min=1)
+def ray_cost(X: np.ndarray, obs) -> np.ndarray:
+    """Symmetrised mean distance of image j's rays from image i's poses, shape ``(N, N)`` (metres).
+
+    Row i is :func:`ray_residuals` of image i's joints against every image's rays, averaged over the joints
+    each image sees; same-camera pairs are ``inf`` (never candidates).
+    """
+    centers, rays, vis = obs.centers(), obs.rays(), obs.visible
+    seen = np.maximum(vis.sum(axis=1), 1)
+    c = np.stack(
+        [
+            np.nan_to_num(ray_residuals(np.broadcast_to(x, X.shape), centers, rays, vis)).sum(1) / seen
+            for x in X
+        ]
+    )
     c = c + c.T
-    c[torch.as_tensor(cam[:, None] == cam[None, :])] = float("inf")
-    return c.numpy()
+    c[obs.cam_id[:, None] == obs.cam_id[None, :]] = np.inf
+    return c
 
 
 def main() -> None:
@@ -63,14 +72,12 @@ def main() -> None:
         with torch.no_grad():
             first = net([seq], solve=True)[0].x_est.double()
         res.setdefault("GTT-Net, one pass", []).append(mpjpe_mm(first.numpy(), gt.points3d))
-        centers, rays = torch.as_tensor(obs.centers()), torch.as_tensor(obs.rays())
-        vis = torch.as_tensor(obs.visible)
         for variant in ("feed", "recand", "both"):
             x = first
             for p in range(1, args.passes + 1):
                 nbr = seq.nbr
                 if variant != "feed":
-                    cost = ray_cost(x, centers, rays, vis, obs.cam_id)
+                    cost = ray_cost(x.numpy(), obs)
                     nbr = torch.as_tensor(
                         neighbourhoods(cost, sequencing="none", cam_id=obs.cam_id, k=net.config.k)
                     )
