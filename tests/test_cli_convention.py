@@ -116,3 +116,12 @@ def test_method_choices_are_registered_methods():
     assert set(AFFINITY_METHODS) <= registered
     reconstruct = _opts(COMMANDS["gttnet reconstruct"])["--method"].type
     assert set(reconstruct.choices) == registered
+
+
+def test_format_choices_are_the_importers_formats():
+    from gttnet.cli._options import INPUT_FORMATS
+    from gttnet.io import FORMATS
+
+    assert INPUT_FORMATS == ("auto", *FORMATS)
+    for name in ("gttnet reconstruct", "gttnet sync"):
+        assert tuple(_opts(COMMANDS[name])["--format"].type.choices) == INPUT_FORMATS

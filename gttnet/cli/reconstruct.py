@@ -12,7 +12,7 @@ import click
 
 from gttdata._cli_common import sample_options
 from gttdata.errors import RigError, friendly_errors
-from gttnet.cli._options import STORED_SAMPLE_HELP, STORED_SPLIT_HELP
+from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 
 __all__ = ["register", "reconstruct_cmd"]
 
@@ -338,7 +338,7 @@ def _resolve_input(
 @click.option(
     "--format",
     "fmt",
-    type=click.Choice(["auto", "h5", "dloe-mat", "gttnet-json"]),
+    type=click.Choice(INPUT_FORMATS),
     default="auto",
     show_default=True,
     help="Layout of a single INPUT file; auto picks it from the suffix (.h5, .mat, .json).",

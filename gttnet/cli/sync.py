@@ -13,7 +13,7 @@ import click
 
 from gttdata._cli_common import sample_options
 from gttdata.errors import friendly_errors
-from gttnet.cli._options import STORED_SAMPLE_HELP, STORED_SPLIT_HELP
+from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 from gttnet.errors import GttNetError
 
 if TYPE_CHECKING:
@@ -93,7 +93,7 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 @click.option(
     "--format",
     "fmt",
-    type=click.Choice(["auto", "h5", "dloe-mat", "gttnet-json"]),
+    type=click.Choice(INPUT_FORMATS),
     default="auto",
     show_default=True,
     help="Input layout; auto picks it from the suffix (.h5, .mat, .json).",
