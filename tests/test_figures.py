@@ -142,21 +142,18 @@ def test_training_curves_match_their_log(tmp_path):
 def test_sync_clocks_figure_matches_its_command(tmp_path):
     """docs/figures/sync_clocks.png is what its documented command writes (clock recovery is deterministic)."""
     pytest.importorskip("matplotlib")
-    import os
     import subprocess
     import sys
 
+    from tests._subprocess import repo_env
+
     out = tmp_path / "sync_clocks.png"
-    env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
-    }
     res = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks/plot_sync_clocks.py"), "--out", str(out)],
         cwd=ROOT,
         capture_output=True,
         text=True,
-        env=env,
+        env=repo_env(),
     )
     assert res.returncode == 0, res.stderr
     assert_images_match(out, FIGURES / "sync_clocks.png")

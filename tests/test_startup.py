@@ -6,15 +6,14 @@ Each check runs in a fresh interpreter, since this test process has long importe
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
 
-REPO = Path(__file__).resolve().parents[1]
+from tests._subprocess import repo_env
+
 HEAVY = ("torch", "numpy", "scipy", "cv2", "h5py", "matplotlib", "yaml", "tqdm", "trimesh", "pyrender")
 
 
@@ -22,8 +21,9 @@ def _loaded_after(statement: str) -> list[str]:
     code = (
         f"import json, sys\n{statement}\nprint(json.dumps(sorted(m for m in {HEAVY!r} if m in sys.modules)))"
     )
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=repo_env(), check=True
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

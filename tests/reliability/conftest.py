@@ -11,19 +11,20 @@ from pathlib import Path
 
 import pytest
 
+from tests._subprocess import repo_env
+
 REPO = Path(__file__).resolve().parents[2]
 TINY = str(REPO / "recipes/gttdata/tiny.yaml")  # 8 samples in 3 blocks; generates in ~0.3 s
 
 
 def cli(package: str, *args: str, timeout: float = 120, **kw) -> subprocess.CompletedProcess:
     """Run ``python -m <package> ARGS`` as a real process (a segfault shows as a negative return code)."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.run(
         [sys.executable, "-m", package, *args],
         capture_output=True,
         text=True,
         timeout=timeout,
-        env=env,
+        env=repo_env(),
         cwd=kw.pop("cwd", REPO),
         **kw,
     )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import random
 import signal
 import subprocess
@@ -13,17 +12,17 @@ from pathlib import Path
 import pytest
 
 from gttdata.shards.reader import ShardReader
+from tests._subprocess import repo_env
 from tests.reliability.conftest import REPO, TINY, cli, one_line_error
 
 
 def _start(*args: str) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen(
         [sys.executable, "-m", "gttdata", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        env=env,
+        env=repo_env(),
         cwd=REPO,
     )
 
