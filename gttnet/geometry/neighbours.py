@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import heapq
 import logging
 
 import numpy as np
@@ -38,28 +37,62 @@ def _ranked(cost: np.ndarray, order: np.ndarray | None) -> np.ndarray:
     return order
 
 
-def _partial_row(
-    i: int, rank: np.ndarray, finite: np.ndarray, cam: np.ndarray, prev: np.ndarray, nxt: np.ndarray, k: int
-) -> list[int]:
-    """Best-first growth: from each other stream, one contiguous run grown from its best-ranked image."""
-    heap: list[tuple[int, int]] = []
-    for s in np.unique(cam):
-        if s == cam[i]:
-            continue
-        members = np.nonzero((cam == s) & finite)[0]
-        if members.size:
-            best = members[np.argmin(rank[members])]
-            heap.append((int(rank[best]), int(best)))
-    heapq.heapify(heap)
-    seen = {j for _, j in heap}
-    out: list[int] = []
-    while heap and len(out) < k:
-        _, j = heapq.heappop(heap)
-        out.append(j)
-        for m in (prev[j], nxt[j]):
-            if m >= 0 and finite[m] and m not in seen:
-                seen.add(int(m))
-                heapq.heappush(heap, (int(rank[m]), int(m)))
+def _partial_rows(
+    rank: np.ndarray, ok: np.ndarray, cam: np.ndarray, stream_index: np.ndarray, k: int
+) -> np.ndarray:
+    """Best-first growth for every row at once: from each other stream, one contiguous run from its best image.
+
+    Row i's state per stream is the run ``[lo, hi]`` of stream positions taken so far; its frontier is the
+    stream's image just before and just after the run (where that image is allowed), or, before the run
+    starts, the stream's best-ranked allowed image (the seed). Each of the K steps takes, in every row, the
+    best-ranked frontier image over all streams, as a priority queue over the frontiers would.
+
+    Args:
+        rank: Rank of image j in row i's ranking, shape ``(N, N)`` int64 (a permutation per row).
+        ok: Allowed neighbours, shape ``(N, N)`` bool (finite cost, other camera).
+        cam: Camera (= stream) of each image, shape ``(N,)``.
+        stream_index: Index within its stream, shape ``(N,)``.
+        k: Neighbours per image K.
+
+    Returns:
+        Neighbour indices, shape ``(N, K)`` int64, in the order taken, ``-1`` padded.
+    """
+    n = cam.shape[0]
+    streams = np.unique(cam)
+    members = [np.flatnonzero(cam == s) for s in streams]
+    members = [m[np.argsort(stream_index[m], kind="stable")] for m in members]
+    length = max(m.size for m in members)
+    img = np.full((streams.size, length + 2), -1, dtype=np.int64)  # one -1 guard on each side
+    for v, m in enumerate(members):
+        img[v, 1 : m.size + 1] = m
+    big = np.iinfo(np.int64).max
+    real = img >= 0
+    # rank of each stream slot in each row, ``big`` where not allowed: shape (N, V, L + 2)
+    r = np.where(real[None], rank[:, np.maximum(img, 0)], big)
+    r = np.where(real[None] & ok[:, np.maximum(img, 0)], r, big)
+    seed = r.argmin(axis=2)  # (N, V)
+    rows = np.arange(n)[:, None]
+    cols = np.arange(streams.size)[None, :]
+    lo = np.zeros((n, streams.size), dtype=np.int64)  # 0 = not started (slot 0 is a guard)
+    hi = np.zeros((n, streams.size), dtype=np.int64)
+    out = np.full((n, k), -1, dtype=np.int64)
+    for step in range(k):
+        started = lo > 0
+        left = r[rows, cols, np.maximum(lo - 1, 0)]
+        right = r[rows, cols, np.minimum(hi + 1, length + 1)]
+        cand = np.where(started, np.minimum(left, right), r[rows, cols, seed])
+        v = cand.argmin(axis=1)
+        best = cand[np.arange(n), v]
+        live = best < big
+        if not live.any():
+            break
+        i = np.flatnonzero(live)
+        vi = v[i]
+        go_left = started[i, vi] & (left[i, vi] < right[i, vi])
+        slot = np.where(started[i, vi], np.where(go_left, lo[i, vi] - 1, hi[i, vi] + 1), seed[i, vi])
+        out[i, step] = img[vi, slot]
+        lo[i, vi] = np.where(started[i, vi] & ~go_left, lo[i, vi], slot)
+        hi[i, vi] = np.where(started[i, vi] & go_left, hi[i, vi], slot)
     return out
 
 
@@ -139,13 +172,9 @@ def neighbourhoods(
         return out
     if stream_index is None:
         raise SequencingError("sequencing 'partial' needs stream_index")
-    prev, nxt = _stream_links(cam, np.asarray(stream_index))
     rank = np.empty_like(order)
     np.put_along_axis(rank, order, np.arange(n)[None, :].repeat(n, 0), axis=1)
-    for i in range(n):
-        row = _partial_row(i, rank[i], ok[i], cam, prev, nxt, k)
-        out[i, : len(row)] = row
-    return out
+    return _partial_rows(rank, ok, cam, np.asarray(stream_index), k)
 
 
 def chain_affinity(

@@ -11,21 +11,24 @@ import torch
 
 from gttdata.capture.views import Observations
 from gttnet.errors import ModelError
+from gttnet.geometry.candidates import use_candidate_search
 from gttnet.geometry.ordering import (
     pose_graph_affinity,
     spectral_order,
     stream_consistent_order,
     timestamp_order,
 )
+from gttnet.geometry.triangulation import pseudo_triangulate
 from gttnet.methods import Reconstruction, register_method
 from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
-from gttnet.model.inputs import prepare_inputs
+from gttnet.model.inputs import order_streams, prepare_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
     "BUNDLED_MODEL",
     "BUNDLED_NONE_MODEL",
     "BUNDLED_POINTNET_MODEL",
+    "STREAM_ORDER_K",
     "bundled_model_for",
     "MODEL_FORMAT",
     "save_model",
@@ -44,6 +47,11 @@ BUNDLED_NONE_MODEL = BUNDLED_MODEL.with_name("gttnet_default_none.pt")
 #: The cross-domain (PointNet) model for any other skeleton (``recipes/gttnet/pointnet.yaml``); it may be
 #: absent, when no trained model was good enough to ship (see docs/MODEL_CARD_POINTNET.md).
 BUNDLED_POINTNET_MODEL = BUNDLED_MODEL.with_name("gttnet_pointnet.pt")
+#: Links per image of the pose graph that orders each camera's images before the network runs on an
+#: order-free capture (:func:`gttnet.model.inputs.order_streams`). Chosen on the validation splits (paper
+#: protocol 16 sequences, CMU 10; bundled models): median MPJPE 15.3 / 14.9 / 14.7 mm for k = 16 / 32 / 64
+#: on the paper split, where k = 64 broke one capture (51 mm against 19); CMU 11.0 / 11.0 mm for 16 / 32.
+STREAM_ORDER_K = 32
 
 
 def bundled_model_for(skeleton, sequencing: str | None = None) -> Path:
@@ -139,6 +147,12 @@ class GTTNetReconstructor:
         lambda2: Default ray weight of the DLOE layer for calls that pass none (see :meth:`__call__`).
         candidates: Neighbour search under ``none`` sequencing (see
             :func:`gttnet.model.inputs.prepare_inputs`): ``"auto"``, ``"dense"`` or ``"kdtree"``.
+        stream_order: Under ``none`` sequencing with the dense search, first order each camera's images by
+            the pseudo-triangulated poses and reconstruct the capture as a ``partial`` one
+            (:func:`gttnet.model.inputs.order_streams`); False runs the network on the order-free input
+            as it is. None (default): on for the single-topology GTT-Net, off for the PointNet variant,
+            as chosen on each model's validation captures (docs/MODEL_CARD.md,
+            docs/MODEL_CARD_POINTNET.md). The k-d tree search (large captures) never orders streams.
     """
 
     def __init__(
@@ -148,12 +162,14 @@ class GTTNetReconstructor:
         device: str = "auto",
         lambda2: float | None = None,
         candidates: str = "auto",
+        stream_order: bool | None = None,
     ) -> None:
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(device)
         self.candidates = candidates
         self.model = load_model(model_path, device=self.device)
+        self.stream_order = not self.model.config.pointnet if stream_order is None else bool(stream_order)
         self.lambda2 = lambda2
 
     @torch.no_grad()
@@ -176,6 +192,7 @@ class GTTNetReconstructor:
             recovered order: the timestamp order under ``full``, never contradicting a stream under
             ``partial``, under ``none`` the spectral order of a nearest-neighbour graph over the
             reconstructed poses (:func:`gttnet.geometry.ordering.pose_graph_affinity`).
+            ``info["stream_order"]`` says whether the streams were ordered first.
         """
         if not isinstance(obs, Observations):
             raise TypeError(f"GTTNetReconstructor takes Observations, got {type(obs).__name__}")
@@ -183,8 +200,17 @@ class GTTNetReconstructor:
             raise ValueError(f"top_q must be >= 1, got {top_q}")
         lambda2 = self.lambda2 if lambda2 is None else lambda2
         cfg = self.model.config
-        seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates).to(self.device)
-        out = self.model([seq], solve=True, top_q=top_q, lambda2=lambda2, decode=False)[0]
+        streams = (
+            obs.sequencing == "none"
+            and self.stream_order
+            and not use_candidate_search("none", obs.n_images, self.candidates)
+        )
+        if streams:
+            pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+            seq = prepare_inputs(order_streams(obs, pt.X_init, k=STREAM_ORDER_K), k=cfg.k, pseudo=pt)
+        else:
+            seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates)
+        out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=lambda2, decode=False)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         x_est = out.x_est.double().cpu().numpy()
         if obs.sequencing == "none":
@@ -202,6 +228,7 @@ class GTTNetReconstructor:
                 "k": cfg.k,
                 "top_q": cfg.top_q if top_q is None else int(top_q),
                 "device": str(self.device),
+                "stream_order": streams,
             },
         )
 
@@ -220,9 +247,11 @@ def _given_order(obs: Observations, affinity: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=8)
-def cached_reconstructor(model: str | None = None, candidates: str = "auto") -> GTTNetReconstructor:
-    """The one loaded-model cache: a :class:`GTTNetReconstructor` per model path (None = bundled)."""
-    return GTTNetReconstructor(model, candidates=candidates)
+def cached_reconstructor(
+    model: str | None = None, candidates: str = "auto", stream_order: bool | None = None
+) -> GTTNetReconstructor:
+    """The one loaded-model cache: a :class:`GTTNetReconstructor` per model path (None = bundled) and options."""
+    return GTTNetReconstructor(model, candidates=candidates, stream_order=stream_order)
 
 
 @register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
@@ -232,6 +261,7 @@ def reconstruct_gttnet(
     lambda2: float | None = None,
     top_q: int | None = None,
     candidates: str = "auto",
+    stream_order: bool | None = None,
 ) -> Reconstruction:
     """GTT-Net with a bundled model or a given model file.
 
@@ -239,9 +269,9 @@ def reconstruct_gttnet(
     CMU-31 the order-free specialist under ``none`` and the general CMU-31 model otherwise, the PointNet
     model for other skeletons), or the model file/run directory ``model``. ``lambda2`` and
     ``top_q`` override the model's DLOE ray weight and test-time Q for this call (see
-    :meth:`GTTNetReconstructor.__call__`); the cached model is not modified. ``candidates`` as in
-    :class:`GTTNetReconstructor`.
+    :meth:`GTTNetReconstructor.__call__`); the cached model is not modified. ``candidates`` and
+    ``stream_order`` as in :class:`GTTNetReconstructor`.
     """
     if model is None:
         model = str(bundled_model_for(obs.skeleton, obs.sequencing))
-    return cached_reconstructor(str(model), candidates)(obs, top_q=top_q, lambda2=lambda2)
+    return cached_reconstructor(str(model), candidates, stream_order)(obs, top_q=top_q, lambda2=lambda2)

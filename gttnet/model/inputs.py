@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from gttnet.geometry.candidates import CandidatePseudoTriangulation
     from gttnet.geometry.triangulation import PseudoTriangulation
 
-__all__ = ["SequenceInput", "prepare_inputs", "random_rotation"]
+__all__ = ["SequenceInput", "order_streams", "prepare_inputs", "random_rotation"]
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,12 @@ def random_rotation(rng: np.random.Generator, *, mode: str = "so3") -> np.ndarra
 
 
 def prepare_inputs(
-    obs: Observations, *, k: int, dtype: torch.dtype = torch.float32, candidates: str = "auto"
+    obs: Observations,
+    *,
+    k: int,
+    dtype: torch.dtype = torch.float32,
+    candidates: str = "auto",
+    pseudo: PseudoTriangulation | None = None,
 ) -> SequenceInput:
     """Pseudo-triangulate, build neighbourhoods and pack an :class:`Observations` for the network.
 
@@ -117,6 +122,8 @@ def prepare_inputs(
         candidates: Neighbour search under ``none`` sequencing: ``"dense"`` (all pairs), ``"kdtree"``
             (epipolar-descriptor candidates, :func:`~gttnet.geometry.candidates.candidate_pseudo_triangulate`)
             or ``"auto"`` (k-d tree above :data:`~gttnet.geometry.candidates.DENSE_MAX_IMAGES` images). Other conditions use dense.
+        pseudo: The dense pseudo-triangulation of these very images, to reuse instead of recomputing it
+            (the reconstructor orders streams with it first); only where the dense search applies.
 
     Returns:
         A :class:`SequenceInput` on the CPU.
@@ -130,10 +137,18 @@ def prepare_inputs(
 
     pt: CandidatePseudoTriangulation | PseudoTriangulation
     if use_candidate_search(obs.sequencing, obs.n_images, candidates):
+        if pseudo is not None:
+            raise ValueError(
+                "prepare_inputs: a dense pseudo-triangulation cannot be reused by the k-d tree search"
+            )
         pt = candidate_pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
         nbr = pt.neighbours(k)
     else:
-        pt = pseudo_triangulate(centers, rays, obs.visible, obs.cam_id)
+        if pseudo is not None and pseudo.cost.shape != (obs.n_images, obs.n_images):
+            raise ValueError(
+                f"prepare_inputs: pseudo holds {pseudo.cost.shape[0]} images, the capture {obs.n_images}"
+            )
+        pt = pseudo_triangulate(centers, rays, obs.visible, obs.cam_id) if pseudo is None else pseudo
         nbr = neighbourhoods(
             pt.cost,
             sequencing=obs.sequencing,
@@ -161,3 +176,42 @@ def prepare_inputs(
         sequencing=obs.sequencing,
         domain=obs.skeleton.name,
     )
+
+
+def order_streams(obs: Observations, x_init: np.ndarray, *, k: int) -> Observations:
+    """A ``partial`` view of an order-free capture, each camera's images put in the order its poses suggest.
+
+    Without sequencing, the images of one camera are sorted by the spectral order of a k-nearest-neighbour
+    graph over whole poses (:func:`~gttnet.geometry.ordering.pose_graph_affinity` of ``x_init``, e.g. the
+    pseudo-triangulated structure). Within one camera consecutive frames lie several global images apart,
+    so this per-stream order is far more often right than the global order it comes from; GTT-Net then
+    reconstructs the view as a ``partial`` capture (stream-limited neighbourhoods and the stream chain).
+    Only observations enter; the view's stream order is an estimate, not a timing the capture gave.
+
+    The view keeps the capture's image order (a loaded ``partial`` view is grouped by camera instead; the
+    network's inputs do not depend on that), so its results need no reindexing.
+
+    Args:
+        obs: An order-free capture (``sequencing == "none"``), N images.
+        x_init: Poses to order the images by, shape ``(N, J, 3)``, any unit; NaN joints count as 0.
+        k: Links per image of the pose graph.
+
+    Returns:
+        ``obs`` marked ``partial``, with the estimated ``stream_index`` of each image, shape ``(N,)``.
+
+    Raises:
+        ValueError: If ``obs`` is not order-free or ``x_init`` does not match it.
+    """
+    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order
+
+    if obs.sequencing != "none":
+        raise ValueError(f"order_streams: expects an order-free capture, got sequencing {obs.sequencing!r}")
+    X = np.nan_to_num(np.asarray(x_init, dtype=np.float64))
+    if X.shape[0] != obs.n_images:
+        raise ValueError(f"order_streams: x_init holds {X.shape[0]} images, the capture {obs.n_images}")
+    rank = np.asarray(spectral_order(pose_graph_affinity(X, k=k, sparse=True)))
+    stream_index = np.empty(obs.n_images, dtype=np.int64)
+    for cam in np.unique(obs.cam_id):
+        mine = np.flatnonzero(obs.cam_id == cam)
+        stream_index[mine[np.argsort(rank[mine], kind="stable")]] = np.arange(mine.size)
+    return replace(obs, sequencing="partial", stream_index=stream_index)

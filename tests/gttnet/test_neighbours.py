@@ -69,6 +69,61 @@ def test_partial_runs_are_contiguous_and_other_stream(seed, k):
         assert row.size == min(k, int(np.sum(cam != cam[i])))
 
 
+def _partial_reference(cost, cam, si, k):
+    """The rule as written in neighbourhoods' docstring, one row at a time with a priority queue."""
+    import heapq
+
+    n = cam.size
+    ok = np.isfinite(cost) & (cam[:, None] != cam[None, :])
+    rank = np.argsort(np.argsort(cost, axis=1, kind="stable"), axis=1)
+    pos = {}
+    for c in np.unique(cam):
+        m = np.flatnonzero(cam == c)
+        pos[c] = m[np.argsort(si[m], kind="stable")].tolist()
+    out = np.full((n, k), -1)
+    for i in range(n):
+        heap = []
+        for c, stream in pos.items():
+            allowed = [j for j in stream if ok[i, j]]
+            if c != cam[i] and allowed:
+                best = min(allowed, key=lambda j: rank[i, j])
+                heap.append((rank[i, best], best))
+        heapq.heapify(heap)
+        seen = {j for _, j in heap}
+        taken = []
+        while heap and len(taken) < k:
+            _, j = heapq.heappop(heap)
+            taken.append(j)
+            stream = pos[cam[j]]
+            p = stream.index(j)
+            for q in (p - 1, p + 1):
+                if 0 <= q < len(stream) and ok[i, stream[q]] and stream[q] not in seen:
+                    seen.add(stream[q])
+                    heapq.heappush(heap, (rank[i, stream[q]], stream[q]))
+        out[i, : len(taken)] = taken
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 12), st.integers(2, 5), st.floats(0.0, 0.5))
+def test_partial_matches_priority_queue_reference(seed, k, n_cams, p_inf):
+    # The vectorised growth takes the same images in the same order as the one-row priority queue, with
+    # non-finite pairs (missing joints) breaking runs.
+    g = np.random.default_rng(seed)
+    n = 24
+    cam = g.integers(0, n_cams, size=n)
+    si = np.zeros(n, dtype=int)
+    for c in range(n_cams):
+        idx = np.nonzero(cam == c)[0]
+        si[idx] = g.permutation(idx.size)
+    cost = g.uniform(size=(n, n))
+    cost = cost + cost.T
+    cost[g.uniform(size=(n, n)) < p_inf] = INF
+    cost[cam[:, None] == cam[None, :]] = INF
+    nb = neighbourhoods(cost, sequencing="partial", cam_id=cam, stream_index=si, k=k)
+    np.testing.assert_array_equal(nb, _partial_reference(cost, cam, si, k))
+
+
 def test_full_uses_time_nearest_images():
     t = np.array([0.0, 0.32, 0.1, 0.25, 0.2])
     nb = neighbourhoods(np.zeros((5, 5)), sequencing="full", cam_id=np.arange(5), timestamp_s=t, k=2)
