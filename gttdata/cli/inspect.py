@@ -46,12 +46,21 @@ def plain(value) -> str:
 
 _UNITS = {"_m": "m", "_px": "px", "_deg": "deg", "_hz": "Hz", "_s": "s"}
 
+#: Keys whose name alone is ambiguous once the unit is moved out (two rig jitters would both read "jitter").
+_LABELS = {"jitter_m": "centre jitter", "jitter_deg": "azimuth jitter", "jitter_s": "timing jitter"}
+
 
 def field(key: str, value) -> str:
-    """``radius_m, 3.0`` -> ``radius 3 m``: a key and its value, the unit suffix moved after the value."""
+    """``radius_m, 3.0`` -> ``radius 3 m``: a key and its value, the unit suffix moved after the value.
+
+    Example:
+        >>> field("jitter_deg", 5.0), field("jitter_m", 0.1)
+        ('azimuth jitter 5 deg', 'centre jitter 0.1 m')
+    """
     for suffix, unit in _UNITS.items():
         if key.endswith(suffix):
-            return f"{key[: -len(suffix)].replace('_', ' ')} {plain(value)} {unit}"
+            label = _LABELS.get(key, key[: -len(suffix)].replace("_", " "))
+            return f"{label} {plain(value)} {unit}"
     return f"{key.replace('_', ' ')} {plain(value)}"
 
 
