@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -21,21 +22,39 @@ def repo_manifests_dir() -> Path:
 @click.command("verify")
 @click.argument("root", type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--deep", is_flag=True, help="Also read every sample (chunk checksums, shapes).")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print one JSON object (ok, shards, samples, problems) on stdout."
+)
 @friendly_errors
-def verify_cmd(root: Path, deep: bool) -> None:
+def verify_cmd(root: Path, deep: bool, as_json: bool) -> None:
     """Check every shard of ROOT against manifest.json: presence, size, SHA-256, schema version.
 
-    Exits with status 1 and one line per bad shard when anything differs.
+    Exits with status 1 and one line per bad shard when anything differs (with --json: the object, whose
+    ``problems`` lists those lines, and the same status).
 
     \b
     Examples:
       gttdata verify data/gttdata/default
       gttdata verify data/gttdata/default --deep
+      gttdata verify data/gttdata/default --json
     """
     from gttdata.manifest import load_manifest, verify_manifest
 
     manifest = load_manifest(root)
     problems = verify_manifest(root, manifest, deep=deep)
+    if as_json:
+        report = {
+            "root": str(root),
+            "ok": not problems,
+            "deep": deep,
+            "shards": len(manifest.shards),
+            "samples": manifest.n_samples(),
+            "problems": list(problems),
+        }
+        click.echo(json.dumps(report))
+        if problems:
+            raise SystemExit(1)
+        return
     for line in problems:
         click.echo(f"BAD {line}", err=True)
     if problems:

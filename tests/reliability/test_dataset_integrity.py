@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import h5py
@@ -58,3 +59,16 @@ def test_missing_shard_names_the_file(tiny_data, tmp_path):
     ]  # --split defaults to test
     line = one_line_error(CliRunner().invoke(main, args))
     assert "None" not in line and "train/shard-00000.h5" in line
+
+
+def test_verify_json_reports_ok_and_problems(tiny_data, tmp_path):
+    root = tmp_path / "d"
+    shutil.copytree(tiny_data, root)
+    res = CliRunner().invoke(main, ["verify", str(root), "--json"])
+    report = json.loads(res.output)
+    assert res.exit_code == 0 and report["ok"] and report["problems"] == [] and report["shards"] >= 1
+    _flip_in_chunk(root / "train/shard-00000.h5")
+    res = CliRunner().invoke(main, ["verify", str(root), "--json"])
+    report = json.loads(res.output)
+    assert res.exit_code == 1 and not report["ok"]
+    assert any("train/shard-00000.h5" in p for p in report["problems"])
