@@ -8,7 +8,13 @@ import numpy as np
 
 from gttnet.errors import SequencingError
 
-__all__ = ["neighbourhoods", "chain_affinity", "temporal_chain_affinity", "temporal_interpolation_affinity"]
+__all__ = [
+    "neighbourhoods",
+    "chain_affinity",
+    "pose_weighted_chain",
+    "temporal_chain_affinity",
+    "temporal_interpolation_affinity",
+]
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +181,42 @@ def neighbourhoods(
     rank = np.empty_like(order)
     np.put_along_axis(rank, order, np.arange(n)[None, :].repeat(n, 0), axis=1)
     return _partial_rows(rank, ok, cam, np.asarray(stream_index), k)
+
+
+def pose_weighted_chain(chain: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """A within-stream chain whose links are weighted by how alike the two linked poses are.
+
+    Each link (i, j) gets ``exp(-d_ij^2 / (2 m))``, with ``d_ij`` the Euclidean distance between the two
+    images' whole poses and ``m`` the median of ``d^2`` over all links: a typical link keeps weight
+    ``exp(-1/2)`` or more, a link that jumps between far-apart poses fades out. Meant for stream orders that
+    are estimated rather than given (:func:`gttnet.model.inputs.order_streams`), where a wrong link would
+    otherwise tie images from different moments together.
+
+    Args:
+        chain: Chain affinity, shape ``(N, N)``, non-zero at the links (e.g. :func:`chain_affinity`).
+        poses: Poses of the N images, shape ``(N, J, 3)``, any unit; NaN joints count as 0.
+
+    Returns:
+        The weighted chain, shape ``(N, N)`` float64, symmetric where ``chain`` is, zero off the links.
+
+    Example:
+        >>> chain = chain_affinity(np.zeros(5, int), np.arange(5))
+        >>> poses = np.array([0.0, 1.0, 2.0, 3.0, 10.0])[:, None, None] * np.ones((1, 1, 3))
+        >>> np.round(pose_weighted_chain(chain, poses)[[0, 1, 2, 3], [1, 2, 3, 4]], 3).tolist()
+        [0.607, 0.607, 0.607, 0.0]
+    """
+    c = np.asarray(chain, dtype=np.float64)
+    n = c.shape[0]
+    X = np.nan_to_num(np.asarray(poses, dtype=np.float64)).reshape(n, -1)
+    rows, cols = np.nonzero(c)
+    out = np.zeros_like(c)
+    if rows.size == 0:
+        return out
+    d2 = ((X[rows] - X[cols]) ** 2).sum(axis=1)
+    m = float(np.median(d2))
+    w = np.exp(-d2 / (2.0 * m)) if m > 0 else np.ones_like(d2)
+    out[rows, cols] = c[rows, cols] * w
+    return out
 
 
 def chain_affinity(

@@ -18,10 +18,9 @@ from gttnet.geometry.ordering import (
     stream_consistent_order,
     timestamp_order,
 )
-from gttnet.geometry.triangulation import pseudo_triangulate
 from gttnet.methods import Reconstruction, register_method
 from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
-from gttnet.model.inputs import order_streams, prepare_inputs
+from gttnet.model.inputs import prepare_inputs, prepare_stream_ordered_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
@@ -48,9 +47,9 @@ BUNDLED_NONE_MODEL = BUNDLED_MODEL.with_name("gttnet_default_none.pt")
 #: absent, when no trained model was good enough to ship (see docs/MODEL_CARD_POINTNET.md).
 BUNDLED_POINTNET_MODEL = BUNDLED_MODEL.with_name("gttnet_pointnet.pt")
 #: Links per image of the pose graph that orders each camera's images before the network runs on an
-#: order-free capture (:func:`gttnet.model.inputs.order_streams`). Chosen on the validation splits (paper
-#: protocol 16 sequences, CMU 10; bundled models): median MPJPE 15.3 / 14.9 / 14.7 mm for k = 16 / 32 / 64
-#: on the paper split, where k = 64 broke one capture (51 mm against 19); CMU 11.0 / 11.0 mm for 16 / 32.
+#: order-free capture (:func:`gttnet.model.inputs.prepare_stream_ordered_inputs`). Chosen on the validation
+#: splits (bundled CMU-31 models, none, mean MPJPE mm for k = 16 / 32 / 64): paper protocol (16 captures)
+#: 257.0 / 249.2 / 254.1, CMU (10) 229.8 / 226.2 / 225.9, the mixed default set (20) 304.4 / 301.7 / 310.1.
 STREAM_ORDER_K = 32
 
 
@@ -148,9 +147,10 @@ class GTTNetReconstructor:
         candidates: Neighbour search under ``none`` sequencing (see
             :func:`gttnet.model.inputs.prepare_inputs`): ``"auto"``, ``"dense"`` or ``"kdtree"``.
         stream_order: Under ``none`` sequencing with the dense search, first order each camera's images by
-            the pseudo-triangulated poses and reconstruct the capture as a ``partial`` one
-            (:func:`gttnet.model.inputs.order_streams`); False runs the network on the order-free input
-            as it is. None (default): on for the single-topology GTT-Net, off for the PointNet variant,
+            the pseudo-triangulated poses and reconstruct the capture as a ``partial`` one whose chain
+            links are weighted by pose similarity
+            (:func:`gttnet.model.inputs.prepare_stream_ordered_inputs`); False runs the network on the
+            order-free input as it is. None (default): on for the single-topology GTT-Net, off for the PointNet variant,
             as chosen on each model's validation captures (docs/MODEL_CARD.md,
             docs/MODEL_CARD_POINTNET.md). The k-d tree search (large captures) never orders streams.
     """
@@ -206,8 +206,7 @@ class GTTNetReconstructor:
             and not use_candidate_search("none", obs.n_images, self.candidates)
         )
         if streams:
-            pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
-            seq = prepare_inputs(order_streams(obs, pt.X_init, k=STREAM_ORDER_K), k=cfg.k, pseudo=pt)
+            seq = prepare_stream_ordered_inputs(obs, k=cfg.k, order_k=STREAM_ORDER_K)
         else:
             seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates)
         out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=lambda2, decode=False)[0]

@@ -14,7 +14,13 @@ if TYPE_CHECKING:
     from gttnet.geometry.candidates import CandidatePseudoTriangulation
     from gttnet.geometry.triangulation import PseudoTriangulation
 
-__all__ = ["SequenceInput", "order_streams", "prepare_inputs", "random_rotation"]
+__all__ = [
+    "SequenceInput",
+    "order_streams",
+    "prepare_inputs",
+    "prepare_stream_ordered_inputs",
+    "random_rotation",
+]
 
 
 @dataclass(frozen=True)
@@ -215,3 +221,33 @@ def order_streams(obs: Observations, x_init: np.ndarray, *, k: int) -> Observati
         mine = np.flatnonzero(obs.cam_id == cam)
         stream_index[mine[np.argsort(rank[mine], kind="stable")]] = np.arange(mine.size)
     return replace(obs, sequencing="partial", stream_index=stream_index)
+
+
+def prepare_stream_ordered_inputs(
+    obs: Observations, *, k: int, order_k: int, dtype: torch.dtype = torch.float32
+) -> SequenceInput:
+    """Network inputs of an order-free capture reconstructed as a ``partial`` one with estimated streams.
+
+    Pseudo-triangulates once, orders each camera's images by the poses (:func:`order_streams` with
+    ``order_k`` links per image), builds the ``partial`` neighbourhoods, and weights each link of the
+    within-stream chain by how alike its two pseudo-triangulated poses are
+    (:func:`~gttnet.geometry.neighbours.pose_weighted_chain`): an estimated order can be wrong, and a wrong
+    link between far-apart poses then fades out instead of tying two moments together.
+
+    Args:
+        obs: An order-free capture (``sequencing == "none"``).
+        k: Neighbours per image K.
+        order_k: Links per image of the pose graph that orders the streams.
+        dtype: Floating dtype of the tensors.
+
+    Returns:
+        A :class:`SequenceInput` on the CPU, images in ``obs``'s order, ``sequencing == "partial"``.
+    """
+    from gttnet.geometry.neighbours import pose_weighted_chain
+    from gttnet.geometry.triangulation import pseudo_triangulate
+
+    pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+    seq = prepare_inputs(order_streams(obs, pt.X_init, k=order_k), k=k, dtype=dtype, pseudo=pt)
+    assert seq.chain is not None  # a partial view always has its chain
+    chain = pose_weighted_chain(seq.chain.numpy(), pt.X_init)
+    return replace(seq, chain=torch.as_tensor(chain, dtype=dtype))

@@ -205,3 +205,29 @@ def test_temporal_interpolation_affinity_interpolates_time(n_cams, n, seed):
         before = t[(cam != cam[i]) & (t < t[i])].max()
         after = t[(cam != cam[i]) & (t > t[i])].min()
         assert set(t[linked[i]]) == {before, after}
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.integers(2, 4))
+def test_pose_weighted_chain_keeps_the_links_and_fades_jumps(seed, n_cams):
+    from gttnet.geometry.neighbours import pose_weighted_chain
+
+    g = np.random.default_rng(seed)
+    n = 24
+    cam = np.sort(g.integers(0, n_cams, size=n))
+    si = np.zeros(n, dtype=int)
+    for c in range(n_cams):
+        idx = np.nonzero(cam == c)[0]
+        si[idx] = np.arange(idx.size)
+    chain = chain_affinity(cam, si)
+    poses = np.cumsum(g.normal(scale=0.01, size=(n, 5, 3)), axis=0)  # a slow walk through pose space
+    links = np.argwhere(np.triu(chain) > 0)
+    if len(links) < 3:
+        return
+    a, b = links[g.integers(len(links))]
+    poses[b:] += 10.0  # one link (and others across the same cut) now jumps far
+    w = pose_weighted_chain(chain, poses)
+    assert (w[chain == 0] == 0).all()
+    np.testing.assert_allclose(w, w.T)
+    assert (w >= 0).all() and (w <= 1).all()
+    assert w[a, b] < 1e-6 < np.median(w[chain > 0])
