@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,12 +122,54 @@ def _pair_block(
     return ok, gap, b
 
 
+#: Ranked neighbours searched first for each image's first one that qualifies (see :func:`_first_in_rank`).
+_RANK_HEAD = 16
+
+
+def _first_in_rank(
+    qualifies: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    needed: np.ndarray,
+    head: int = _RANK_HEAD,
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each image i and joint p, the first rank k whose neighbour qualifies, and whether one does.
+
+    ``qualifies(rows, ks)`` gives, shape ``(len(rows), len(ks), J)``, whether the neighbour of rank ``ks``
+    of each image in ``rows`` qualifies for each joint. The first ``head`` ranks of every image are
+    searched first; only images with a ``needed`` joint left over search all N ranks. Where ``needed``,
+    the same answer as searching all ranks at once, without forming the ``(N, N, J)`` array when the
+    best-ranked neighbours suffice; elsewhere only the first ``head`` ranks are searched.
+
+    Args:
+        qualifies: See above.
+        needed: Joints whose answer is used, shape ``(N, J)`` bool.
+        head: Ranks searched for every image first.
+
+    Returns:
+        ``(first, found)``, each shape ``(N, J)``: the rank (0 where none qualifies) and whether one does.
+    """
+    n = needed.shape[0]
+    rows = np.arange(n)
+    block = qualifies(rows, np.arange(min(head, n)))
+    first = np.argmax(block, axis=1)
+    found = np.take_along_axis(block, first[:, None, :], axis=1)[:, 0]
+    rest = np.flatnonzero((needed & ~found).any(axis=1)) if head < n else np.zeros(0, dtype=np.int64)
+    if rest.size:
+        block = qualifies(rest, np.arange(n))
+        first[rest] = np.argmax(block, axis=1)
+        found[rest] = np.take_along_axis(block, first[rest][:, None, :], axis=1)[:, 0]
+    return first, found
+
+
 def _fill_missing(X: np.ndarray, have: np.ndarray, order: np.ndarray, finite: np.ndarray) -> np.ndarray:
     """Fill joints without a triangulation from the best-ranked neighbour that has one, else fallbacks."""
-    ranked_finite = np.take_along_axis(finite, order, axis=1)
-    cand = have[order] & ranked_finite[:, :, None]  # (N, N, J): k-th ranked neighbour has joint p
-    first = np.argmax(cand, axis=1)  # (N, J)
-    found = np.take_along_axis(cand, first[:, None, :], axis=1)[:, 0]
+
+    def donor_has(rows: np.ndarray, ks: np.ndarray) -> np.ndarray:
+        nb = order[rows[:, None], ks[None, :]]  # (R, k): the k-th ranked neighbours
+        out: np.ndarray = have[nb] & finite[rows[:, None], nb][:, :, None]
+        return out
+
+    # only joints without their own estimate need a donor, and only joints some image has can get one
+    first, found = _first_in_rank(donor_has, ~have & np.asarray(have.any(axis=0))[None, :])
     nb = np.take_along_axis(order, first, axis=1)
     return fill_from_donors(X, have, found, nb)
 
@@ -305,9 +348,13 @@ def _initial_structure(
 ) -> tuple[np.ndarray, np.ndarray]:
     """X_init and the source image of each joint (see :func:`pseudo_triangulate`)."""
     n, j = vis.shape
-    ranked = np.take_along_axis(valid, order[:, :, None], axis=1)  # (N, N, J) in rank order
-    first = np.argmax(ranked, axis=1)
-    have = np.take_along_axis(ranked, first[:, None, :], axis=1)[:, 0]
+
+    def pair_valid(rows: np.ndarray, ks: np.ndarray) -> np.ndarray:
+        out: np.ndarray = valid[rows[:, None], order[rows[:, None], ks[None, :]]]  # (R, k, J) in rank order
+        return out
+
+    # a pair is valid for visible joints only; a visible joint no other camera sees never is
+    first, have = _first_in_rank(pair_valid, vis & (valid.any(axis=1)))
     src = np.where(have, np.take_along_axis(order, first, axis=1), -1)
     rows = np.broadcast_to(np.arange(n)[:, None], (n, j))
     m = np.maximum(src, 0)

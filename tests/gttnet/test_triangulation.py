@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gttdata.capture.views import make_view
 from gttnet.errors import GttNetError
@@ -152,3 +154,19 @@ def test_errors():
         pseudo_triangulate(C, r[:1], np.ones((2, 1), bool), np.array([0, 1]))
     with pytest.raises(GttNetError, match="no triangulable joint"):
         pseudo_triangulate(np.array([[0.0, 0, 0], [1.0, 0, 0]]), r, np.ones((2, 1), bool), np.array([0, 0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 40), st.integers(1, 4), st.floats(0.0, 0.3))
+def test_first_in_rank_matches_a_search_over_all_ranks(seed, n, j, density):
+    # The head-first search gives the full search's answer wherever the joint is needed.
+    from gttnet.geometry.triangulation import _first_in_rank
+
+    g = np.random.default_rng(seed)
+    table = g.uniform(size=(n, n, j)) < density  # qualifies[i, k, p]
+    needed = g.uniform(size=(n, j)) < 0.7
+    first, found = _first_in_rank(lambda rows, ks: table[rows[:, None], ks[None, :]], needed, head=4)
+    ref_found = table.any(axis=1)
+    ref_first = np.argmax(table, axis=1)
+    np.testing.assert_array_equal(found[needed], ref_found[needed])
+    np.testing.assert_array_equal(first[needed & ref_found], ref_first[needed & ref_found])
