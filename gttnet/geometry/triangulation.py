@@ -320,13 +320,10 @@ def pseudo_triangulate(
             with np.errstate(invalid="ignore", divide="ignore"):
                 c_blk = np.where(cnt > 0, err.sum(0) / cnt, np.inf)
                 v_blk = np.where(cnt > 0, b.sum(0) / cnt, np.nan)
-            cost[rows, cols], conv[rows, cols] = c_blk, v_blk
-            cost[cols, rows], conv[cols, rows] = c_blk.T, v_blk.T
-            valid[rows, cols] = ok.transpose(1, 2, 0)
-            valid[cols, rows] = ok.transpose(2, 1, 0)
-    inv = np.empty_like(perm)
-    inv[perm] = np.arange(n)
-    cost, conv, valid = cost[np.ix_(inv, inv)], conv[np.ix_(inv, inv)], valid[inv][:, inv]
+            # written straight to the callers' image order (no permuted copy of the N x N x J array)
+            fwd, back = np.ix_(perm[rows], perm[cols]), np.ix_(perm[cols], perm[rows])
+            cost[fwd], conv[fwd], valid[fwd] = c_blk, v_blk, ok.transpose(1, 2, 0)
+            cost[back], conv[back], valid[back] = c_blk.T, v_blk.T, ok.transpose(2, 1, 0)
     if not np.isfinite(cost).any():
         raise GttNetError(
             "pseudo-triangulation found no triangulable joint: need >= 2 cameras sharing a joint"
