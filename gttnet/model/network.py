@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
+from gttnet.errors import SingularStructureError
 from gttnet.model.affinity import AffinityHead, AffinityOutput, sparse_affinity
 from gttnet.model.inputs import SequenceInput
 from gttnet.model.patches import patch_index
@@ -83,6 +84,8 @@ class SequenceOutput:
             sequence only.
         a_sparse: A^S, shape ``(N, N)``.
         x_est: X^E from the DLOE layer in world, metres, shape ``(N, J, 3)``; None when not solved.
+        singular: The DLOE layer ran but its system was singular (``forward(skip_singular=True)`` only);
+            ``x_est`` is then None.
         ae_pairs: ``(decoder, encoder)`` feature pairs for ℓ^AE, each shape ``(N, P_i, 3)``.
         pointnet_recon: PointNet reconstruction of X_init, shape ``(N, J, 3)``; None without PointNet.
     """
@@ -92,6 +95,7 @@ class SequenceOutput:
     x_est: torch.Tensor | None
     ae_pairs: list[tuple[torch.Tensor, torch.Tensor]]
     pointnet_recon: torch.Tensor | None
+    singular: bool = False
 
 
 def _default_solver() -> Callable[..., torch.Tensor]:
@@ -156,6 +160,7 @@ class GTTNet(nn.Module):
         top_q: int | None = None,
         lambda2: float | None = None,
         decode: bool = True,
+        skip_singular: bool = False,
     ) -> list[SequenceOutput]:
         """Run the network on a list of sequences.
 
@@ -166,6 +171,9 @@ class GTTNet(nn.Module):
             lambda2: Ray weight of the DLOE layer for this call; None = ``config.lambda2``.
             decode: Run the U-Net's decoder, whose outputs feed only the autoencoding loss (``ae_pairs``);
                 inference passes False (same affinities and structure, half the layers).
+            skip_singular: A sequence whose DLOE-layer system is singular gets ``x_est=None`` and
+                ``singular=True`` instead of raising :class:`~gttnet.errors.SingularStructureError`
+                (training: one degenerate sample must not end a run).
 
         Returns:
             One :class:`SequenceOutput` per sequence (``ae_pairs`` empty without the decoder).
@@ -205,9 +213,16 @@ class GTTNet(nn.Module):
             else:
                 chain = seq.chain if seq.sequencing == "partial" else None
                 a_sparse = sparse_affinity(a.kept, a.keep, seq.nbr, chain=chain)
-            x_est = self.solve(a_sparse, seq, lambda2=lambda2) if solve else None
+            x_est, singular = None, False
+            if solve:
+                try:
+                    x_est = self.solve(a_sparse, seq, lambda2=lambda2)
+                except SingularStructureError:
+                    if not skip_singular:
+                        raise
+                    singular = True
             pairs = [(d[sl], e[sl]) for d, e in u.pairs]
-            outs.append(SequenceOutput(a, a_sparse, x_est, pairs, recon))
+            outs.append(SequenceOutput(a, a_sparse, x_est, pairs, recon, singular))
         return outs
 
     def solve(

@@ -196,7 +196,14 @@ def _factor(H: torch.Tensor) -> tuple[str, tuple[torch.Tensor, ...]]:
         RuntimeWarning,
         stacklevel=4,
     )
-    return "lu", torch.linalg.lu_factor(H)
+    LU, pivots, info = torch.linalg.lu_factor_ex(H)
+    bad = torch.nonzero(info != 0).flatten()
+    if bad.numel():
+        raise SingularStructureError(
+            f"X-step system singular for {bad.numel()} of {H.shape[0]} joint systems (first: system "
+            f"{int(bad[0])}, zero pivot {int(info[bad[0]])}): the affinity graph does not pin those joints down"
+        )
+    return "lu", (LU, pivots)
 
 
 def _solve_factored(kind: str, fac: tuple[torch.Tensor, ...], rhs: torch.Tensor) -> torch.Tensor:

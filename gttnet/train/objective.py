@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import torch
 from torch import nn
 
@@ -11,6 +13,8 @@ from gttnet.model.network import GTTNet, SequenceOutput
 from gttnet.train.stages import Stage
 
 __all__ = ["stage_losses", "StepObjective"]
+
+log = logging.getLogger(__name__)
 
 
 def _affinity_target(stage: Stage, item: TrainItem, out: SequenceOutput, top_q: int) -> torch.Tensor:
@@ -47,6 +51,8 @@ def stage_losses(
             elif name == "affinity":
                 target = _affinity_target(stage, item, out, cfg.top_q)
                 vals.append(losses.affinity_loss(out.affinity, target, norm=stage.norm))
+            elif name in ("structure", "smoothness") and out.singular:
+                continue  # a degenerate sample: its other losses still train (logged by the loop)
             elif name in ("structure", "smoothness") and out.x_est is None:
                 raise ValueError(
                     f"stage {stage.name!r} weights the {name} loss but the DLOE layer did not run"
@@ -86,5 +92,13 @@ class StepObjective(nn.Module):
 
     def forward(self, items: list[TrainItem], stage: Stage) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Loss of ``stage`` on ``items`` (all sequences packed into one network call)."""
-        outputs = self.model([it.inputs for it in items], solve=stage.needs_solver)
+        outputs = self.model([it.inputs for it in items], solve=stage.needs_solver, skip_singular=True)
+        for item, out in zip(items, outputs, strict=True):
+            if out.singular:
+                log.warning(
+                    "stage %s: DLOE-layer system singular for a %d-image sequence; its structure losses are "
+                    "skipped this step",
+                    stage.name,
+                    item.inputs.x_init.shape[0],
+                )
         return stage_losses(stage, self.model, items, outputs)

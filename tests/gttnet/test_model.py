@@ -401,3 +401,31 @@ def test_stream_order_default_follows_the_model_family(tmp_path, tiny_model_path
     assert inference.GTTNetReconstructor(tiny_model_path, device="cpu").stream_order is True
     assert inference.GTTNetReconstructor(pn, device="cpu").stream_order is False
     assert inference.GTTNetReconstructor(pn, device="cpu", stream_order=True).stream_order is True
+
+
+def test_a_singular_dloe_system_skips_only_that_sequences_structure_loss(small_view, caplog):
+    # Training must not end on one degenerate sample: the objective drops its structure loss (logged) and
+    # still trains the others; outside training the error is raised as before.
+    from gttnet.data import prepare_item
+    from gttnet.errors import SingularStructureError
+    from gttnet.train.objective import StepObjective
+    from gttnet.train.stages import Stage
+
+    torch.manual_seed(0)
+    model = build_model("gttnet_tiny", n_joints=5, k=6)
+    items = [prepare_item(*make_view(small_view, c), k=6) for c in ("none", "partial")]
+    real_solve = model.solve
+
+    def solve(a_sparse, seq, **kw):
+        if seq.sequencing == "none":
+            raise SingularStructureError("X-step system singular (test)")
+        return real_solve(a_sparse, seq, **kw)
+
+    model.solve = solve  # type: ignore[method-assign]
+    stage = Stage(name="dloe", losses={"affinity": 1.0, "structure": 100.0}, steps=1)
+    total, parts = StepObjective(model)(items, stage)
+    assert torch.isfinite(total) and "structure" in parts
+    assert "singular" in caplog.text
+    total.backward()
+    with pytest.raises(SingularStructureError):
+        model([items[0].inputs], solve=True)

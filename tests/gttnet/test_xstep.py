@@ -289,3 +289,15 @@ def test_structure_diagonal_is_the_diagonal_of_the_structure_matrix():
     A[0, 2, 2] = 0.4  # a non-zero diagonal is covered too
     ref = torch.diagonal(_structure_matrix(A, 0.1), dim1=-2, dim2=-1)
     torch.testing.assert_close(_structure_diagonal(A, 0.1), ref, rtol=1e-12, atol=1e-12)
+
+
+def test_dense_factor_reports_a_singular_system_as_singular_structure():
+    # It used to surface as torch's RuntimeError "U[k,k] is zero ..." and end a training run.
+    from gttnet.errors import SingularStructureError
+    from gttnet.solvers._system import _factor
+
+    H = torch.eye(3).repeat(2, 1, 1)
+    H[1, 2, 2] = 0.0
+    with pytest.warns(RuntimeWarning, match="not numerically positive definite"):
+        with pytest.raises(SingularStructureError, match="1 of 2 joint systems"):
+            _factor(H)
