@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import logging
+from pathlib import Path
 
 import click
 
@@ -66,9 +68,25 @@ def _prepare_run_dir(output_dir: str, resume: bool, overwrite: bool) -> None:
 @click.option("--runtime", "runtime_only", is_flag=True, help="Run only the recipe's runtime study.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the summary (implies --no-progress).")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object (run folder and, per cell, MPJPE mean/median and Kendall tau) instead of the summary.",
+)
 @friendly_errors
 def evaluate_cmd(
-    recipe_path, overrides, workers, output_dir, resume, overwrite, no_plots, runtime_only, progress, quiet
+    recipe_path,
+    overrides,
+    workers,
+    output_dir,
+    resume,
+    overwrite,
+    no_plots,
+    runtime_only,
+    progress,
+    quiet,
+    as_json,
 ):
     """Evaluate methods on RECIPE's test sequences; OVERRIDES are key.sub=value.
 
@@ -80,6 +98,7 @@ def evaluate_cmd(
     Examples:
       gttnet evaluate recipes/gttnet/eval_smoke.yaml --out runs/eval_smoke
       gttnet evaluate recipes/gttnet/eval_smoke.yaml data.n_sequences=1 --workers 2 --out runs/eval_one --resume
+      gttnet evaluate recipes/gttnet/eval_smoke.yaml --out runs/eval_smoke --resume --json
     """
     from gttnet.evaluate.recipe import RuntimeSpec, load_eval_recipe
     from gttnet.evaluate.run import evaluate
@@ -92,14 +111,73 @@ def evaluate_cmd(
     recipe = load_eval_recipe(recipe_path, ovr)
     if runtime_only:
         out = f"{recipe.output_dir}/runtime"
-        res = run_runtime(recipe.runtime or RuntimeSpec(), out, progress=progress)
+        res = run_runtime(recipe.runtime or RuntimeSpec(), out, progress=progress and not as_json)
+        if as_json:
+            report = {
+                "runtime_dir": out,
+                "lengths": res.lengths,
+                "n_images": res.n_images,
+                "seconds": res.seconds,
+            }
+            click.echo(json.dumps(report))
+            return
         click.echo(res.markdown)
         click.echo(f"runtime study -> {out}")
         return
     _prepare_run_dir(recipe.output_dir, resume, overwrite)
-    run_dir = evaluate(recipe, workers=workers, resume=True, progress=progress, plots=not no_plots)
+    run_dir = evaluate(
+        recipe, workers=workers, resume=True, progress=progress and not as_json, plots=not no_plots
+    )
+    if as_json:
+        click.echo(json.dumps({"run_dir": str(run_dir), **cell_summary(run_dir / "errors.csv")}))
+        return
     click.echo((run_dir / "summary.md").read_text())
     click.echo(f"evaluation -> {run_dir}")
+
+
+def cell_summary(errors_csv: Path) -> dict:
+    """Per cell of ``errors.csv`` (condition, value, sequencing, method): counts and error statistics.
+
+    Args:
+        errors_csv: An evaluation's ``errors.csv``.
+
+    Returns:
+        ``{"errors_csv": path, "cells": [...]}``; each cell has ``condition``, ``variable``, ``value``,
+        ``sequencing``, ``method``, ``n_ok``, ``n_skipped``, ``mpjpe_mm_mean``, ``mpjpe_mm_median`` and
+        ``kendall_tau_mean`` (None where no row finished).
+    """
+    import csv
+
+    import numpy as np
+
+    cells: dict[tuple, dict] = {}
+    with open(errors_csv, newline="") as f:
+        for row in csv.DictReader(f):
+            key = (row["condition"], row["variable"], row["value"], row["sequencing"], row["method"])
+            c = cells.setdefault(key, {"mpjpe": [], "tau": [], "skipped": 0})
+            if row["status"] == "ok" and row["mpjpe_mm"]:
+                c["mpjpe"].append(float(row["mpjpe_mm"]))
+                if row["kendall_tau"]:
+                    c["tau"].append(float(row["kendall_tau"]))
+            else:
+                c["skipped"] += 1
+    out = []
+    for (condition, variable, value, sequencing, method), c in cells.items():
+        out.append(
+            {
+                "condition": condition,
+                "variable": variable,
+                "value": value,
+                "sequencing": sequencing,
+                "method": method,
+                "n_ok": len(c["mpjpe"]),
+                "n_skipped": c["skipped"],
+                "mpjpe_mm_mean": float(np.mean(c["mpjpe"])) if c["mpjpe"] else None,
+                "mpjpe_mm_median": float(np.median(c["mpjpe"])) if c["mpjpe"] else None,
+                "kendall_tau_mean": float(np.mean(c["tau"])) if c["tau"] else None,
+            }
+        )
+    return {"errors_csv": str(errors_csv), "cells": out}
 
 
 def register(main: click.Group) -> None:

@@ -46,6 +46,22 @@ def test_evaluate_smoke_recipe_and_resume(tmp_path):
     assert len((tmp_path / "run" / "errors.csv").read_text().splitlines()) == n_rows
 
 
+def test_evaluate_json_summarises_every_cell(tmp_path):
+    args = ["evaluate", "recipes/gttnet/eval_smoke.yaml", "data.n_sequences=2", "sweeps=[]"]
+    res = _run(*args, "methods=[pseudo, dloe]", "sequencing=[none]", "--out", tmp_path / "run", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output)
+    assert report["run_dir"] == str(tmp_path / "run")
+    cells = {c["method"]: c for c in report["cells"]}
+    assert set(cells) == {"pseudo", "dloe"}
+    for c in cells.values():
+        assert c["sequencing"] == "none" and c["n_ok"] == 2 and c["n_skipped"] == 0
+        assert c["mpjpe_mm_mean"] > 0 and 0 <= c["kendall_tau_mean"] <= 1
+    rows = [r.split(",") for r in (tmp_path / "run" / "errors.csv").read_text().splitlines()[1:]]
+    dloe = [float(r[8]) for r in rows if r[5] == "dloe"]
+    assert cells["dloe"]["mpjpe_mm_mean"] == pytest.approx(sum(dloe) / len(dloe))
+
+
 def test_evaluate_bad_key_is_one_line(tmp_path):
     res = _run("evaluate", "recipes/gttnet/eval_smoke.yaml", "data.bogus=1", "--out", tmp_path / "x")
     assert res.exit_code != 0
