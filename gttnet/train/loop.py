@@ -118,6 +118,9 @@ def _prepare(
         model.load_state_dict(payload["model"])
         state = payload["state"]
         set_rng_states(payload["rng"])
+        dropped = logger.drop_after(state.global_step)
+        if dropped:
+            log.info("resume at step %d: dropped %d log records written after it", state.global_step, dropped)
     elif recipe.model.init is not None:
         try:  # non-architecture settings (Q, lambdas, solver) may differ from the initial model's
             model.load_state_dict(load_model(recipe.model.init).state_dict())

@@ -41,6 +41,33 @@ class RunLog:
             except ImportError:
                 log.debug("tensorboard not installed: JSONL log only")
 
+    def drop_after(self, global_step: int) -> int:
+        """Forget the records an interrupted run wrote after its last checkpoint (resume starts there).
+
+        Keeps the meta records and every record with ``global_step <= global_step``; the file is replaced
+        atomically. Without it a resumed run logs those steps twice.
+
+        Args:
+            global_step: The checkpoint's global step.
+
+        Returns:
+            How many records were dropped.
+        """
+        if not self.enabled or not self.path.is_file():
+            return 0
+        from gttdata.fileio import atomic_write
+
+        lines = [ln for ln in self.path.read_text().splitlines() if ln.strip()]
+        keep = []
+        for ln in lines:
+            rec = json.loads(ln)
+            if rec.get("kind") == "meta" or int(rec.get("global_step", 0)) <= global_step:
+                keep.append(ln)
+        if len(keep) < len(lines):
+            with atomic_write(self.path, "w") as fh:
+                fh.write("".join(k + "\n" for k in keep))
+        return len(lines) - len(keep)
+
     def write(self, record: dict) -> None:
         """Append one record (keys ``kind`` and ``global_step`` required); numbers go to TensorBoard."""
         if not self.enabled:

@@ -284,6 +284,24 @@ def _run_torchrun(tmp_path: Path) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300, check=False)
 
 
+def test_resume_drops_log_records_written_after_the_checkpoint(tmp_path):
+    # A run killed after its last checkpoint left records for steps it will redo; they were logged twice.
+    r = parse_train_recipe(_recipe(tmp_path))
+    full = train(r, out=tmp_path / "full", progress=False)
+    train(r, out=tmp_path / "part", max_steps=4, progress=False)
+    log_path = tmp_path / "part" / "log.jsonl"
+    with log_path.open("a") as fh:  # what a crash between checkpoint and the next one leaves behind
+        fh.write(json.dumps({"kind": "train", "global_step": 5, "step": 2, "loss": 123.0}) + "\n")
+    train(out=tmp_path / "part", resume=True, progress=False)
+
+    def steps(run):
+        records = [json.loads(x) for x in (tmp_path / run / "log.jsonl").read_text().splitlines()]
+        return [(x["kind"], x["global_step"]) for x in records if x["kind"] != "meta"]
+
+    assert steps("part") == steps("full")
+    assert full.finished
+
+
 def test_ddp_two_processes_gloo(tmp_path):
     """Run ``torchrun`` with 2 CPU processes (gloo): disjoint samples per rank, replicas checked equal at the end."""
     proc = _run_torchrun(tmp_path)
