@@ -139,6 +139,24 @@ def test_training_curves_match_their_log(tmp_path):
     assert_images_match(made, FIGURES / "training_curves_cpu.png")
 
 
+def test_long_training_curves_match_their_log(tmp_path):
+    """The committed curves of the long CPU continuation are plot_learning_curves of its committed log."""
+    pytest.importorskip("matplotlib")
+    from gttnet.train.curves import plot_learning_curves, read_history
+
+    (tmp_path / "log.jsonl").write_bytes((FIGURES / "training_curves_long.jsonl").read_bytes())
+    history = read_history(tmp_path)
+    steps = [r["global_step"] for r in history if r["kind"] == "train"]
+    assert steps == sorted(set(steps))  # one record per step: the crashed run's extra record is gone
+    made = plot_learning_curves(
+        history,
+        tmp_path / "curves.png",
+        title="bundled CMU-31 model continued on the CPU: stage 2, 30,000-step cosine schedule, first 6,400 steps",
+    )
+    assert made is not None
+    assert_images_match(made, FIGURES / "training_curves_long.png")
+
+
 def test_sync_clocks_figure_matches_its_command(tmp_path):
     """docs/figures/sync_clocks.png is what its documented command writes (clock recovery is deterministic)."""
     pytest.importorskip("matplotlib")
