@@ -29,6 +29,7 @@ from gttdata.generate_plan import build_sample  # noqa: E402
 from gttdata.recipe import load_recipe  # noqa: E402
 from gttnet.baselines import reconstruct  # noqa: E402
 from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm  # noqa: E402
+from gttnet.geometry.ordering import stream_ranks  # noqa: E402
 from gttnet.sync import Clocks, apply_clocks, clock_times  # noqa: E402
 
 HPF = {"spacing": "time", "n_folds": 3, "search": "bracket"}  # what `sync` runs after its clocks
@@ -60,10 +61,7 @@ def none_to_sync(obs: Observations) -> tuple[np.ndarray, float]:
         ``(points3d in input order, the stream index recovered for each image)``.
     """
     d = reconstruct(obs, "dloe")
-    si = np.empty(obs.n_images, dtype=np.int64)
-    for c in np.unique(obs.cam_id):
-        sel = np.flatnonzero(obs.cam_id == c)
-        si[sel[np.argsort(d.order[sel], kind="stable")]] = np.arange(sel.size)
+    si = stream_ranks(d.order, obs.cam_id)
     partial = Observations(
         sequencing="partial",
         skeleton=obs.skeleton,

@@ -17,6 +17,7 @@ __all__ = [
     "spectral_embedding",
     "spectral_order",
     "stream_consistent_order",
+    "stream_ranks",
     "symmetrise",
     "timestamp_order",
 ]
@@ -206,6 +207,32 @@ def timestamp_order(timestamp_s: np.ndarray) -> np.ndarray:
     rank = np.empty(t.shape[0], dtype=np.int64)
     rank[np.argsort(t, kind="stable")] = np.arange(t.shape[0])
     return rank
+
+
+def stream_ranks(rank: np.ndarray, cam_id: np.ndarray) -> np.ndarray:
+    """Each image's place among its own camera's images when all are put in the order ``rank`` gives.
+
+    Turns a global order (recovered, or read from a file) into per-camera stream indices; ties keep the
+    images' order in the input.
+
+    Args:
+        rank: A rank (or any sort key) of each image, shape ``(N,)``.
+        cam_id: Camera (= stream) of each image, shape ``(N,)``.
+
+    Returns:
+        Index of each image within its stream, ``0..n_c - 1`` per camera, shape ``(N,)`` int64.
+
+    Example:
+        >>> stream_ranks(np.array([3, 0, 2, 1]), np.array([0, 0, 1, 1])).tolist()
+        [1, 0, 1, 0]
+    """
+    r = np.asarray(rank)
+    cam = np.asarray(cam_id)
+    out = np.empty(cam.shape[0], dtype=np.int64)
+    for c in np.unique(cam):
+        mine = np.flatnonzero(cam == c)
+        out[mine[np.argsort(r[mine], kind="stable")]] = np.arange(mine.size)
+    return out
 
 
 def stream_consistent_order(rank: np.ndarray, cam_id: np.ndarray, stream_index: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ import numpy as np
 
 from gttdata.skeleton import Skeleton, default_skeleton
 from gttnet.errors import ImportFormatError
+from gttnet.geometry.ordering import stream_ranks
 from gttnet.io._views import UNITS, ImportedCapture, resolve_units
 
 __all__ = ["RAY_FOCAL_PX", "read_gttnet_json", "rays_to_pixels", "skeleton_from_limbs", "write_gttnet_json"]
@@ -327,10 +328,7 @@ def read_gttnet_json(path: str | Path, *, units: str | None = None) -> ImportedC
     T = np.tile(np.eye(4), (n, 1, 1))
     T[:, :3, :3] = R[cam]
     T[:, :3, 3] = -np.einsum("nab,nb->na", R[cam], centres)
-    stream = np.zeros(n, dtype=np.int32)
-    for c in range(V):
-        mine = np.flatnonzero(cam == c)
-        stream[mine[np.argsort(rank[mine], kind="stable")]] = np.arange(mine.shape[0])
+    stream = stream_ranks(rank, cam).astype(np.int32)
     log.info(
         "%s: %d images, %d joints (%s), %d cameras (units %s%s)",
         path, n, p, skeleton.name, V, units, ", rays only" if rays_only else "",

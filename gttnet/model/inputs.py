@@ -208,19 +208,15 @@ def order_streams(obs: Observations, x_init: np.ndarray, *, k: int) -> Observati
     Raises:
         ValueError: If ``obs`` is not order-free or ``x_init`` does not match it.
     """
-    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order
+    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order, stream_ranks
 
     if obs.sequencing != "none":
         raise ValueError(f"order_streams: expects an order-free capture, got sequencing {obs.sequencing!r}")
     X = np.nan_to_num(np.asarray(x_init, dtype=np.float64))
     if X.shape[0] != obs.n_images:
         raise ValueError(f"order_streams: x_init holds {X.shape[0]} images, the capture {obs.n_images}")
-    rank = np.asarray(spectral_order(pose_graph_affinity(X, k=k, sparse=True)))
-    stream_index = np.empty(obs.n_images, dtype=np.int64)
-    for cam in np.unique(obs.cam_id):
-        mine = np.flatnonzero(obs.cam_id == cam)
-        stream_index[mine[np.argsort(rank[mine], kind="stable")]] = np.arange(mine.size)
-    return replace(obs, sequencing="partial", stream_index=stream_index)
+    rank = spectral_order(pose_graph_affinity(X, k=k, sparse=True))
+    return replace(obs, sequencing="partial", stream_index=stream_ranks(rank, obs.cam_id))
 
 
 def prepare_stream_ordered_inputs(
