@@ -138,6 +138,8 @@ def evaluate_cmd(
 def cell_summary(errors_csv: Path) -> dict:
     """Per cell of ``errors.csv`` (condition, value, sequencing, method): counts and error statistics.
 
+    The statistics are :func:`gttnet.evaluate.summary.group_stats`, the ones ``summary.md`` shows.
+
     Args:
         errors_csv: An evaluation's ``errors.csv``.
 
@@ -146,38 +148,35 @@ def cell_summary(errors_csv: Path) -> dict:
         ``sequencing``, ``method``, ``n_ok``, ``n_skipped``, ``mpjpe_mm_mean``, ``mpjpe_mm_median`` and
         ``kendall_tau_mean`` (None where no row finished).
     """
-    import csv
+    import math
+    from collections import Counter
 
-    import numpy as np
+    from gttnet.evaluate.results import read_rows
+    from gttnet.evaluate.summary import group_stats
 
-    cells: dict[tuple, dict] = {}
-    with open(errors_csv, newline="") as f:
-        for row in csv.DictReader(f):
-            key = (row["condition"], row["variable"], row["value"], row["sequencing"], row["method"])
-            c = cells.setdefault(key, {"mpjpe": [], "tau": [], "skipped": 0})
-            if row["status"] == "ok" and row["mpjpe_mm"]:
-                c["mpjpe"].append(float(row["mpjpe_mm"]))
-                if row["kendall_tau"]:
-                    c["tau"].append(float(row["kendall_tau"]))
-            else:
-                c["skipped"] += 1
-    out = []
-    for (condition, variable, value, sequencing, method), c in cells.items():
-        out.append(
-            {
-                "condition": condition,
-                "variable": variable,
-                "value": value,
-                "sequencing": sequencing,
-                "method": method,
-                "n_ok": len(c["mpjpe"]),
-                "n_skipped": c["skipped"],
-                "mpjpe_mm_mean": float(np.mean(c["mpjpe"])) if c["mpjpe"] else None,
-                "mpjpe_mm_median": float(np.median(c["mpjpe"])) if c["mpjpe"] else None,
-                "kendall_tau_mean": float(np.mean(c["tau"])) if c["tau"] else None,
-            }
-        )
-    return {"errors_csv": str(errors_csv), "cells": out}
+    rows = read_rows(errors_csv)
+    variable = {r["condition"]: r["variable"] for r in rows}
+    n_rows = Counter((r["condition"], float(r["value"]), r["sequencing"], r["method"]) for r in rows)
+
+    def number(x: float) -> float | None:
+        return None if math.isnan(x) else x
+
+    cells = [
+        {
+            "condition": g.condition,
+            "variable": variable[g.condition],
+            "value": f"{g.value:g}",
+            "sequencing": g.sequencing,
+            "method": g.method,
+            "n_ok": g.n,
+            "n_skipped": n_rows[(g.condition, g.value, g.sequencing, g.method)] - g.n,
+            "mpjpe_mm_mean": number(g.mean_mm),
+            "mpjpe_mm_median": number(g.median_mm),
+            "kendall_tau_mean": number(g.tau),
+        }
+        for g in group_stats(rows)
+    ]
+    return {"errors_csv": str(errors_csv), "cells": cells}
 
 
 def register(main: click.Group) -> None:
