@@ -54,16 +54,8 @@ def gttnet_timer(model: str | None = None, device: str = "cpu"):
     """
     import torch
 
-    from gttnet.model.inference import GTTNetReconstructor, bundled_model_for
+    from gttnet.model.inference import bundled_model_for, cached_reconstructor
     from gttnet.model.inputs import prepare_inputs
-
-    cache: dict[str, GTTNetReconstructor] = {}
-
-    def reconstructor(obs) -> GTTNetReconstructor:
-        path = model if model is not None else str(bundled_model_for(obs.skeleton, obs.sequencing))
-        if path not in cache:
-            cache[path] = GTTNetReconstructor(path, device=device)
-        return cache[path]
 
     try:
         from gttnet.model.inference import load_model
@@ -82,7 +74,8 @@ def gttnet_timer(model: str | None = None, device: str = "cpu"):
         return run_untrained, f"untrained gttnet_base ({exc}); timing does not depend on the weights"
 
     def run(obs) -> np.ndarray:
-        return reconstructor(obs)(obs).points3d  # numpy: the result is back on the host
+        path = model if model is not None else str(bundled_model_for(obs.skeleton, obs.sequencing))
+        return cached_reconstructor(path, device=device)(obs).points3d  # numpy: back on the host
 
     return (
         run,

@@ -247,10 +247,13 @@ def _given_order(obs: Observations, affinity: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def cached_reconstructor(
-    model: str | None = None, candidates: str = "auto", stream_order: bool | None = None
+    model: str | None = None,
+    candidates: str = "auto",
+    stream_order: bool | None = None,
+    device: str = "auto",
 ) -> GTTNetReconstructor:
     """The one loaded-model cache: a :class:`GTTNetReconstructor` per model path (None = bundled) and options."""
-    return GTTNetReconstructor(model, candidates=candidates, stream_order=stream_order)
+    return GTTNetReconstructor(model, device=device, candidates=candidates, stream_order=stream_order)
 
 
 @register_method("gttnet", requires="none", summary="GTT-Net: learned affinity + DLOE layer (trained model)")
