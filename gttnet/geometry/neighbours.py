@@ -72,10 +72,9 @@ def _partial_rows(
     for v, m in enumerate(members):
         img[v, 1 : m.size + 1] = m
     big = np.iinfo(np.int64).max
-    real = img >= 0
-    # rank of each stream slot in each row, ``big`` where not allowed: shape (N, V, L + 2)
-    r = np.where(real[None], rank[:, np.maximum(img, 0)], big)
-    r = np.where(real[None] & ok[:, np.maximum(img, 0)], r, big)
+    safe = np.maximum(img, 0)  # guards read image 0, masked below
+    # rank of each stream slot in each row, ``big`` at the guards and where not allowed: shape (N, V, L + 2)
+    r = np.where((img >= 0)[None] & ok[:, safe], rank[:, safe], big)
     seed = r.argmin(axis=2)  # (N, V)
     rows = np.arange(n)[:, None]
     cols = np.arange(streams.size)[None, :]
