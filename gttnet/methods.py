@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from gttdata.capture.views import SEQUENCING, Observations
-from gttnet.errors import SequencingError
+from gttnet.errors import GttNetError, SequencingError
 from gttnet.geometry.ordering import spectral_order
 
 __all__ = [
@@ -231,6 +231,8 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
 
     Raises:
         SequencingError: If the method needs more sequencing than ``obs`` has.
+        GttNetError: If no image observes any joint. Joints that no image observes are NaN in the result
+            (``info["unobserved_joints"]`` names them).
         ModelError: For ``"gttnet"`` without a trained model (raised by the method).
         ValueError: For an unknown method or option.
     """
@@ -239,6 +241,12 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
     spec = method_spec(method)
     check_sequencing(obs, spec)
     _check_options(spec, options)
+    unseen = np.asarray(~np.asarray(obs.visible, dtype=bool).any(axis=0), dtype=bool)
+    if unseen.all():
+        raise GttNetError(
+            f"reconstruct: no joint of the {obs.n_joints}-joint skeleton {obs.skeleton.name!r} is observed "
+            f"in any of the {obs.n_images} images"
+        )
     t0 = time.perf_counter()
     rec = spec.fn(obs, **options)
     order = rec.order
@@ -251,4 +259,19 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
             f"expected {(obs.n_images, obs.n_joints, 3)}"
         )
     log.info("%s (%s): %d images in %.2f s", method, obs.sequencing, obs.n_images, seconds)
-    return replace(rec, order=order, seconds=seconds, method=method, sequencing=obs.sequencing)
+    rec = replace(rec, order=order, seconds=seconds, method=method, sequencing=obs.sequencing)
+    return _blank_unobserved(rec, obs, unseen) if unseen.any() else rec
+
+
+def _blank_unobserved(rec: Reconstruction, obs: Observations, unseen: np.ndarray) -> Reconstruction:
+    """NaN for the joints no image observes (a method's value for them would be made up), with a warning."""
+    names = [obs.skeleton.joint_names[j] for j in np.flatnonzero(unseen)]
+    log.warning(
+        "%s: %s %s missing in every image: 3D left NaN",
+        rec.method,
+        "joints" if len(names) > 1 else "joint",
+        ", ".join(names),
+    )
+    X = rec.points3d.copy()
+    X[:, unseen] = np.nan
+    return replace(rec, points3d=X, info={**rec.info, "unobserved_joints": names})

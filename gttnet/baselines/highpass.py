@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import solveh_banded
+from scipy.linalg import LinAlgError, solveh_banded
 
 from gttdata.capture.views import Observations
 from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
@@ -125,15 +125,20 @@ def fit_highpass(
             None (all 1).
 
     Returns:
-        Joints in world, metres, shape ``(N, J, 3)``, in the same (time) order.
+        Joints in world, metres, shape ``(N, J, 3)``, in the same (time) order. A joint whose rays do not
+        pin its trajectory down (too few of them for the prior's null space, e.g. seen in one or two
+        images or never) is NaN: its system is singular and any value would be made up.
     """
     n, J = visible.shape
     P = ray_projectors(rays, visible, weight)
     ab = _banded_systems(P, lam, order, timestamp_s)
     rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
-    X = np.empty((n, J, 3))
+    X = np.full((n, J, 3), np.nan)
     for j in range(J):
-        X[:, j] = solveh_banded(ab[j], rhs[j]).reshape(n, 3)
+        try:
+            X[:, j] = solveh_banded(ab[j], rhs[j]).reshape(n, 3)
+        except LinAlgError:
+            log.debug("hpf: joint %d is undetermined (%d rays)", j, int(visible[:, j].sum()))
     return X
 
 
@@ -246,8 +251,17 @@ def reconstruct_hpf(
     X = np.empty((obs.n_images, obs.n_joints, 3))
     X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts, weight=weight)
     log.debug("hpf: lam=%g", lam)
+    info: dict = {"lam": float(lam), "cv_ray_error_m": {f"{a:g}": b for a, b in cv.items()}}
+    lost = np.flatnonzero(np.isnan(X).any(axis=(0, 2)) & obs.visible.any(axis=0))
+    if lost.size:
+        names = [obs.skeleton.joint_names[j] for j in lost]
+        log.warning(
+            "hpf: %s %s seen in too few images to fix a trajectory (%s observations): left NaN",
+            "joints" if len(names) > 1 else "joint",
+            ", ".join(names),
+            ", ".join(str(int(obs.visible[:, j].sum())) for j in lost),
+        )
+        info["undetermined_joints"] = names
     return Reconstruction(
-        points3d=X,
-        affinity=temporal_chain_affinity(np.asarray(obs.timestamp_s)),
-        info={"lam": float(lam), "cv_ray_error_m": {f"{a:g}": b for a, b in cv.items()}},
+        points3d=X, affinity=temporal_chain_affinity(np.asarray(obs.timestamp_s)), info=info
     )

@@ -22,12 +22,19 @@ log = logging.getLogger(__name__)
 def _method_fields(rec) -> dict:
     """The method fields of a reconstruction's report.
 
-    ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto") and,
-    after clock recovery, ``clock_offsets_s`` ({camera: s}).
+    ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto"),
+    ``nan_joints`` (indices of the joints left NaN: never observed, or too few rays for the method) and,
+    after clock recovery, ``clock_offsets_s`` ({camera: s}). Where joints are NaN, ``mpjpe_mm`` is over
+    the others.
     """
-    out = {"method": rec.info.get("method_ran", rec.method)}
+    import numpy as np
+
+    out: dict[str, Any] = {"method": rec.info.get("method_ran", rec.method)}
     if out["method"] != rec.method:
         out["requested_method"] = rec.method
+    lost = ~np.isfinite(rec.points3d).all(axis=(0, 2))
+    if lost.any():
+        out["nan_joints"] = [int(j) for j in np.flatnonzero(lost)]
     if "clock_offsets_s" in rec.info:
         out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
     return out
@@ -53,10 +60,20 @@ class MethodChoice(click.Choice):
         pass
 
 
+def _mpjpe_reconstructed(points3d, gt_points) -> float:
+    """MPJPE (mm) over the joints the method reconstructed: a joint left NaN everywhere is not scored."""
+    import numpy as np
+
+    from gttnet.evaluate.metrics import mpjpe_mm
+
+    keep = np.isfinite(points3d).all(axis=(0, 2))
+    return mpjpe_mm(points3d[:, keep], gt_points[:, keep]) if keep.any() else float("nan")
+
+
 def _report(loaded, rec) -> dict:
     import numpy as np
 
-    from gttnet.evaluate.metrics import kendall_tau, mpjpe_mm
+    from gttnet.evaluate.metrics import kendall_tau
 
     out = {
         "method": rec.method,
@@ -70,7 +87,7 @@ def _report(loaded, rec) -> dict:
     out.update(_method_fields(rec))
     gt = loaded.ground_truth
     if gt is not None:
-        out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt.points3d), 4)
+        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec.points3d, gt.points3d), 4)
         if rec.order is not None and np.all(gt.global_order >= 0):
             out["order_kendall_tau"] = round(kendall_tau(rec.order, gt.global_order), 4)
     return out
@@ -530,8 +547,6 @@ def reconstruct_cmd(
 
 
 def _report_recording(view, rec, gt_points) -> dict:
-    from gttnet.evaluate.metrics import mpjpe_mm
-
     obs = view.observations
     out = {
         "method": rec.method,
@@ -546,7 +561,7 @@ def _report_recording(view, rec, gt_points) -> dict:
         out["windows"] = rec.info["windows"]
     out.update(_method_fields(rec))
     if gt_points is not None:
-        out["mpjpe_mm"] = round(mpjpe_mm(rec.points3d, gt_points), 4)
+        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec.points3d, gt_points), 4)
     return out
 
 

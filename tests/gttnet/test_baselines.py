@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from gttdata.capture.views import make_view
 from gttnet.baselines.highpass import difference_operator, fit_highpass
 from gttnet.baselines.trajectory_basis import dct_basis, fit_trajectory_basis
-from gttnet.errors import ModelError, SequencingError
+from gttnet.errors import GttNetError, ModelError, SequencingError
 from gttnet.evaluate.metrics import mpjpe_mm
 from gttnet.io import load_input
 from gttnet.methods import Reconstruction, available_methods, reconstruct, register_method
@@ -202,3 +203,91 @@ def test_ground_truth_in_files_never_reaches_a_solver(tmp_path, scene, layout):
         a, b = reconstruct(a_in.observations, method), reconstruct(b_in.observations, method)
         np.testing.assert_array_equal(a.points3d, b.points3d)
         np.testing.assert_array_equal(a.order, b.order)
+
+
+def _hide(obs, joint, keep_images=()):
+    """``obs`` with ``joint`` missing everywhere except in the images ``keep_images``."""
+    vis = obs.visible.copy()
+    vis[:, joint] = False
+    vis[list(keep_images), joint] = obs.visible[list(keep_images), joint]
+    return dataclasses.replace(obs, visible=vis)
+
+
+@pytest.mark.parametrize(
+    ("method", "seq"), [("pseudo", "none"), ("dloe", "none"), ("hpf", "full"), ("dct", "full")]
+)
+def test_joint_missing_everywhere_is_nan_and_named(scene, method, seq, caplog):
+    obs, gt = make_view(scene, seq)
+    blank = _hide(obs, 3)
+    with caplog.at_level("WARNING", logger="gttnet.methods"):
+        rec = reconstruct(blank, method)
+    assert np.isnan(rec.points3d[:, 3]).all()
+    others = np.delete(np.arange(obs.n_joints), 3)
+    assert np.isfinite(rec.points3d[:, others]).all()
+    assert rec.info["unobserved_joints"] == [obs.skeleton.joint_names[3]]
+    assert f"joint {obs.skeleton.joint_names[3]} missing in every image" in caplog.text
+    # the other joints are still reconstructed about as well as with the joint present
+    full = reconstruct(obs, method)
+    assert (
+        mpjpe_mm(rec.points3d[:, others], gt.points3d[:, others])
+        < 1.5 * mpjpe_mm(full.points3d[:, others], gt.points3d[:, others]) + 1.0
+    )
+
+
+def test_no_joint_observed_is_one_clear_error(scene):
+    obs, _ = make_view(scene, "none")
+    with pytest.raises(
+        GttNetError, match="no joint of the 8-joint skeleton .* is observed in any of the 80 images"
+    ):
+        reconstruct(dataclasses.replace(obs, visible=np.zeros_like(obs.visible)), "pseudo")
+
+
+def test_hpf_leaves_an_undetermined_joint_nan(scene, caplog):
+    """One ray cannot fix an acceleration-penalised trajectory: that joint is NaN, the rest are solved."""
+    obs, gt = make_view(scene, "full")
+    seen = int(np.flatnonzero(obs.visible[:, 2])[0])
+    with caplog.at_level("WARNING", logger="gttnet.baselines.highpass"):
+        rec = reconstruct(_hide(obs, 2, keep_images=[seen]), "hpf", lam=10.0)
+    assert np.isnan(rec.points3d[:, 2]).all()
+    assert np.isfinite(np.delete(rec.points3d, 2, axis=1)).all()
+    assert rec.info["undetermined_joints"] == [obs.skeleton.joint_names[2]]
+    assert "(1 observations): left NaN" in caplog.text
+    # the joint with all its rays is solved as before
+    assert np.allclose(rec.points3d[:, 0], reconstruct(obs, "hpf", lam=10.0).points3d[:, 0])
+
+
+def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
+    """The CLI keeps a valid JSON summary (MPJPE over the reconstructed joints) and writes the gap out."""
+    from click.testing import CliRunner
+
+    from gttnet.cli import main
+    from gttnet.io.motion_files import read_trc
+
+    vis = scene.visible.copy()
+    vis[:, 3] = False
+    px = scene.keypoints_px.copy()
+    px[:, 3] = np.nan
+    path = tmp_path / "cap.json"
+    write_gttnet_json(dataclasses.replace(scene, visible=vis, keypoints_px=px), path)
+    trc = tmp_path / "out.trc"
+    res = CliRunner().invoke(
+        main,
+        [
+            "reconstruct",
+            str(path),
+            "--units",
+            "m",
+            "--method",
+            "dloe",
+            "--sequencing",
+            "none",
+            "--json",
+            "--out",
+            str(trc),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output.strip().splitlines()[-1])
+    assert summary["nan_joints"] == [3] and np.isfinite(summary["mpjpe_mm"])
+    _, _, points, _ = read_trc(trc)
+    assert np.isnan(points[:, 3]).all() and np.isfinite(np.delete(points, 3, axis=1)).all()
