@@ -9,7 +9,7 @@ from typing import Protocol
 import numpy as np
 
 from gttdata.capture.sample import affinity_from_neighbours
-from gttdata.errors import RigError, SequencingError
+from gttdata.errors import KeypointFormatError, RigError, SequencingError
 from gttdata.skeleton import Skeleton
 
 __all__ = [
@@ -100,6 +100,7 @@ class Observations:
             raise ValueError(f"stream_time_s must have shape ({n},), got {np.shape(self.stream_time_s)}")
         if self.confidence is not None and np.shape(self.confidence) != (n, j):
             raise ValueError(f"confidence must have shape ({n}, {j}), got {np.shape(self.confidence)}")
+        self._check_keypoints_and_times(n, j)
         for name in ("K", "cam_from_world"):  # NaN cameras used to surface as "no triangulable joint"
             value = np.asarray(getattr(self, name), dtype=np.float64)
             bad = np.asarray(~np.isfinite(value.reshape(value.shape[0], -1)).all(axis=1), dtype=bool)
@@ -108,6 +109,32 @@ class Observations:
                 raise RigError(
                     f"cameras: {name}: expected finite values for every image, found NaN or inf in "
                     f"{int(bad.sum())} of {bad.shape[0]} images (first: image {i}, camera {int(self.cam_id[i])})"
+                )
+
+    def _check_keypoints_and_times(self, n: int, j: int) -> None:
+        """Visible joints have finite pixels; timestamps are finite and, under ``full``, order something."""
+        vis = np.asarray(self.visible, dtype=bool)
+        if vis.shape != (n, j):
+            raise ValueError(f"visible must have shape ({n}, {j}) like keypoints_px, got {vis.shape}")
+        lost = vis & ~np.isfinite(np.asarray(self.keypoints_px, dtype=np.float64)).all(axis=-1)
+        if lost.any():  # each solver used to fail on these in its own words
+            i, p = (int(x) for x in np.argwhere(lost)[0])
+            raise KeypointFormatError(
+                f"keypoints_px: expected finite pixels for every visible joint, found NaN or inf in "
+                f"{int(lost.sum())} (first: image {i}, joint {p} {self.skeleton.joint_names[p]!r}); "
+                "mark them missing in visible"
+            )
+        if self.timestamp_s is not None:
+            t = np.asarray(self.timestamp_s, dtype=np.float64)
+            if t.shape != (n,) or not np.isfinite(t).all():
+                raise SequencingError(
+                    f"timestamp_s: expected {n} finite times, seconds; got shape {t.shape}, "
+                    f"{int((~np.isfinite(t)).sum())} NaN or inf"
+                )
+            if self.sequencing == "full" and n > 1 and float(np.ptp(t)) == 0.0:
+                raise SequencingError(
+                    f"timestamp_s: all {n} timestamps are {float(t[0])!r} s, which orders nothing; give the "
+                    "capture times, or use sequencing 'partial' or 'none'"
                 )
 
     def take(self, rows: np.ndarray) -> Observations:
