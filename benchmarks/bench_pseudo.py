@@ -1,9 +1,11 @@
 """Benchmark of pseudo_triangulate for N = 100..600 images of 31 joints on one core.
 
-Run:  python benchmarks/bench_pseudo.py [--sizes 100 200 300 400 500 600] [--block-rows 64]
+Run:  python benchmarks/bench_pseudo.py [--sizes 100 200 300 400 500 600] [--block-rows 8 64]
 
 The problem is 4 ring cameras (3 m, f = 1000 px) filming 31 points on a moving body, 10 % missing,
-1 px noise; BLAS is pinned to one thread before NumPy is imported. Reports the median of --repeats.
+1 px noise; BLAS is pinned to one thread before NumPy is imported. Several ``--block-rows`` are timed
+interleaved in the same run (the result is identical for every block size); the table gives the median of
+--repeats and each block size's time relative to the first.
 Measured 2026-11-24 at N = 600: 0.14-0.15 s on the 2-core dev VM, 0.42 s on the GPU host's Xeon core.
 """
 
@@ -47,21 +49,26 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[100, 200, 300, 400, 500, 600])
     p.add_argument("--joints", type=int, default=31)
-    p.add_argument("--block-rows", type=int, default=64)
+    p.add_argument("--block-rows", type=int, nargs="+", default=[8, 64])
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    log.info("%6s %12s %12s", "N", "seconds", "us/pair")
+    blocks = args.block_rows
+    log.info("%6s %6s %12s %12s %10s", "N", "block", "seconds", "us/pair", "vs first")
     for n in args.sizes:
         C, r, vis, cam = make_problem(n, args.joints)
-        pseudo_triangulate(C, r, vis, cam, block_rows=args.block_rows)
-        times = []
+        times: dict[int, list[float]] = {b: [] for b in blocks}
+        for b in blocks:
+            pseudo_triangulate(C, r, vis, cam, block_rows=b)
         for _ in range(args.repeats):
-            t0 = time.perf_counter()
-            pseudo_triangulate(C, r, vis, cam, block_rows=args.block_rows)
-            times.append(time.perf_counter() - t0)
-        med = statistics.median(times)
-        log.info("%6d %12.4f %12.3f", n, med, 1e6 * med / (n * n))
+            for b in blocks:
+                t0 = time.perf_counter()
+                pseudo_triangulate(C, r, vis, cam, block_rows=b)
+                times[b].append(time.perf_counter() - t0)
+        base = statistics.median(times[blocks[0]])
+        for b in blocks:
+            med = statistics.median(times[b])
+            log.info("%6d %6d %12.4f %12.3f %9.2fx", n, b, med, 1e6 * med / (n * n), med / base)
 
 
 if __name__ == "__main__":
