@@ -20,7 +20,7 @@ from gttnet.geometry.ordering import (
 )
 from gttnet.methods import Reconstruction, register_method
 from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
-from gttnet.model.inputs import prepare_inputs, prepare_stream_ordered_inputs
+from gttnet.model.inputs import SequenceInput, prepare_inputs, stream_ordered_view_and_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
@@ -143,7 +143,8 @@ class GTTNetReconstructor:
     Args:
         model_path: Model file or run directory; None uses the bundled model.
         device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
-        lambda2: Default ray weight of the DLOE layer for calls that pass none (see :meth:`__call__`).
+        lambda2: Default ray weight of the DLOE layer for calls that pass none: a number, ``"auto"`` or
+            None (the model's own; see :meth:`__call__`).
         candidates: Neighbour search under ``none`` sequencing (see
             :func:`gttnet.model.inputs.prepare_inputs`): ``"auto"``, ``"dense"`` or ``"kdtree"``.
         stream_order: Under ``none`` sequencing with the dense search, first order each camera's images by
@@ -160,7 +161,7 @@ class GTTNetReconstructor:
         model_path: str | Path | None = None,
         *,
         device: str = "auto",
-        lambda2: float | None = None,
+        lambda2: float | str | None = None,
         candidates: str = "auto",
         stream_order: bool | None = None,
     ) -> None:
@@ -174,7 +175,7 @@ class GTTNetReconstructor:
 
     @torch.no_grad()
     def __call__(
-        self, obs: Observations, *, top_q: int | None = None, lambda2: float | None = None
+        self, obs: Observations, *, top_q: int | None = None, lambda2: float | str | None = None
     ) -> Reconstruction:
         """Reconstruct one capture.
 
@@ -185,7 +186,10 @@ class GTTNetReconstructor:
             lambda2: Ray weight of the DLOE layer; None keeps the reconstructor's, else the model's own
                 setting (rays pinned for the bundled model). A finite, noise-aware value
                 (:func:`gttnet.solvers.xstep.noise_aware_lambda2`) lets joints leave their rays by about
-                the pixel noise; the learned affinity is unchanged.
+                the pixel noise; the learned affinity is unchanged. ``"auto"`` measures the noise along
+                the camera streams (:func:`gttnet.geometry.noise.auto_lambda2`: the given streams, or under
+                ``none`` the estimated ones) and weights each image for its own depth; pinned where no
+                stream is long enough. ``info["noise_px"]`` and ``info["lambda2"]`` (median) report it.
 
         Returns:
             :class:`Reconstruction` with points3d (N, J, 3) in world metres, the solver's affinity and the
@@ -199,17 +203,24 @@ class GTTNetReconstructor:
         if top_q is not None and int(top_q) < 1:
             raise ValueError(f"top_q must be >= 1, got {top_q}")
         lambda2 = self.lambda2 if lambda2 is None else lambda2
+        if isinstance(lambda2, str) and lambda2 != "auto":
+            raise ValueError(f"lambda2 must be a number, 'auto' or None, got {lambda2!r}")
         cfg = self.model.config
         streams = (
             obs.sequencing == "none"
             and self.stream_order
             and not use_candidate_search("none", obs.n_images, self.candidates)
         )
+        streams_view = obs
         if streams:
-            seq = prepare_stream_ordered_inputs(obs, k=cfg.k, order_k=STREAM_ORDER_K)
+            streams_view, seq = stream_ordered_view_and_inputs(obs, k=cfg.k, order_k=STREAM_ORDER_K)
         else:
             seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates)
-        out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=lambda2, decode=False)[0]
+        noise_px = None
+        ray_weight: float | np.ndarray | None = None if isinstance(lambda2, str) else lambda2
+        if lambda2 == "auto":
+            ray_weight, noise_px = _own_noise_lambda2(streams_view, seq)
+        out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=ray_weight, decode=False)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         x_est = out.x_est.double().cpu().numpy()
         if obs.sequencing == "none":
@@ -228,8 +239,41 @@ class GTTNetReconstructor:
                 "top_q": cfg.top_q if top_q is None else int(top_q),
                 "device": str(self.device),
                 "stream_order": streams,
+                "lambda2": _summary(ray_weight),
+                "noise_px": noise_px,
             },
         )
+
+
+def _summary(lambda2: float | np.ndarray | None) -> float | None:
+    """The ray weight as ``info`` reports it (JSON): pinned None, else the number or the per-image median."""
+    return None if lambda2 is None else float(np.median(lambda2))
+
+
+def _own_noise_lambda2(obs: Observations, seq: SequenceInput) -> tuple[np.ndarray | None, float | None]:
+    """``lambda2="auto"``: the ray weight for the noise measured along the capture's camera streams.
+
+    The streams are the given ones (``partial``; ``full``: the stream index, else each camera's timestamp
+    order) or, under ``none``, the ones the stream ordering estimated; without any (order-free input that
+    was not stream-ordered) the rays stay pinned. Depth from the pseudo-triangulated ``x_init``.
+    """
+    from gttnet.geometry.noise import auto_lambda2
+    from gttnet.geometry.ordering import stream_ranks
+
+    streams = obs.stream_index
+    if streams is None and obs.timestamp_s is not None:
+        streams = stream_ranks(timestamp_order(obs.timestamp_s), obs.cam_id)
+    if streams is None:
+        return None, None
+    return auto_lambda2(
+        obs.keypoints_px,
+        obs.visible,
+        obs.cam_id,
+        streams,
+        obs.K,
+        obs.cam_from_world,
+        seq.x_init.double().numpy(),
+    )
 
 
 def _given_order(obs: Observations, affinity: np.ndarray) -> np.ndarray:
@@ -260,7 +304,7 @@ def cached_reconstructor(
 def reconstruct_gttnet(
     obs: Observations,
     model: str | None = None,
-    lambda2: float | None = None,
+    lambda2: float | str | None = None,
     top_q: int | None = None,
     candidates: str = "auto",
     stream_order: bool | None = None,

@@ -20,6 +20,7 @@ __all__ = [
     "prepare_inputs",
     "prepare_stream_ordered_inputs",
     "random_rotation",
+    "stream_ordered_view_and_inputs",
 ]
 
 
@@ -239,11 +240,19 @@ def prepare_stream_ordered_inputs(
     Returns:
         A :class:`SequenceInput` on the CPU, images in ``obs``'s order, ``sequencing == "partial"``.
     """
+    return stream_ordered_view_and_inputs(obs, k=k, order_k=order_k, dtype=dtype)[1]
+
+
+def stream_ordered_view_and_inputs(
+    obs: Observations, *, k: int, order_k: int, dtype: torch.dtype = torch.float32
+) -> tuple[Observations, SequenceInput]:
+    """:func:`prepare_stream_ordered_inputs` that also returns the ``partial`` view with the estimated streams."""
     from gttnet.geometry.neighbours import pose_weighted_chain
     from gttnet.geometry.triangulation import pseudo_triangulate
 
     pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
-    seq = prepare_inputs(order_streams(obs, pt.X_init, k=order_k), k=k, dtype=dtype, pseudo=pt)
+    view = order_streams(obs, pt.X_init, k=order_k)
+    seq = prepare_inputs(view, k=k, dtype=dtype, pseudo=pt)
     assert seq.chain is not None  # a partial view always has its chain
     chain = pose_weighted_chain(seq.chain.numpy(), pt.X_init)
-    return replace(seq, chain=torch.as_tensor(chain, dtype=dtype))
+    return view, replace(seq, chain=torch.as_tensor(chain, dtype=dtype))

@@ -6,6 +6,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -158,7 +159,7 @@ class GTTNet(nn.Module):
         *,
         solve: bool = True,
         top_q: int | None = None,
-        lambda2: float | None = None,
+        lambda2: float | np.ndarray | None = None,
         decode: bool = True,
         skip_singular: bool = False,
     ) -> list[SequenceOutput]:
@@ -226,14 +227,14 @@ class GTTNet(nn.Module):
         return outs
 
     def solve(
-        self, a_sparse: torch.Tensor, seq: SequenceInput, *, lambda2: float | None = None
+        self, a_sparse: torch.Tensor, seq: SequenceInput, *, lambda2: float | np.ndarray | None = None
     ) -> torch.Tensor:
         """DLOE layer: structure from the affinity (float32 at least, outside autocast).
 
         Args:
             a_sparse: A^S, shape ``(N, N)``.
             seq: The sequence's inputs (rays and centres in world).
-            lambda2: Ray weight; None = ``config.lambda2``.
+            lambda2: Ray weight, a number or one per image ``(N,)``; None = ``config.lambda2``.
 
         Returns:
             X^E in world, metres, shape ``(N, J, 3)``.
@@ -250,10 +251,16 @@ class GTTNet(nn.Module):
                 seq.rays.to(dtype),
                 seq.visible,
                 lambda1=self.config.lambda1,
-                lambda2=self.config.lambda2 if lambda2 is None else float(lambda2),
+                lambda2=self.config.lambda2 if lambda2 is None else _ray_weight(lambda2),
                 method=self.config.solver_method,
                 **prior,
             )
+
+
+def _ray_weight(lambda2: float | np.ndarray) -> float | np.ndarray:
+    """A ray weight as the solver takes it: a float, or a float64 array of one weight per image."""
+    arr = np.asarray(lambda2, dtype=np.float64)
+    return float(arr) if arr.ndim == 0 else arr
 
 
 MODEL_BUILDERS: dict[str, Callable[..., GTTNet]] = {}

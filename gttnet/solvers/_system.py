@@ -49,12 +49,24 @@ class StructureSystem:
         return X.reshape(self.batch, self.joints, n, 3).transpose(1, 2)
 
 
+def _per_image(lambda2: float | torch.Tensor, b: int, j: int, n: int, like: torch.Tensor) -> torch.Tensor:
+    """A ray weight given once, per image ``(N,)`` or per batch item and image ``(B, N)``, as ``(B J, N)``."""
+    lam = torch.as_tensor(lambda2, dtype=like.dtype, device=like.device)
+    if lam.ndim == 0:
+        return lam.expand(b * j, n)
+    if lam.shape not in ((n,), (b, n)):
+        raise ValueError(
+            f"lambda2 must be a number or have shape ({n},) or ({b}, {n}), got {tuple(lam.shape)}"
+        )
+    return lam.expand(b, n).unsqueeze(1).expand(b, j, n).reshape(b * j, n)
+
+
 def build_system(
     C: torch.Tensor,
     r: torch.Tensor,
     vis: torch.Tensor,
     *,
-    lambda2: float | None,
+    lambda2: float | torch.Tensor | None,
     x_prior: torch.Tensor | None,
     eps: torch.Tensor | None,
 ) -> StructureSystem:
@@ -64,7 +76,8 @@ def build_system(
         C: Camera centres, shape ``(B, N, 3)``.
         r: Unit rays, shape ``(B, N, J, 3)``.
         vis: Visibility mask, shape ``(B, N, J)``.
-        lambda2: Ray weight, or None for the pinned system.
+        lambda2: Ray weight (a number, or per image: shape ``(N,)`` or ``(B, N)``), or None for the pinned
+            system.
         x_prior: Prior points, shape ``(B, N, J, 3)``, or None.
         eps: Ridge per batch item, shape ``(B,)``, or None.
 
@@ -88,8 +101,9 @@ def build_system(
         active = torch.ones(s, n, 3, dtype=torch.bool, device=r.device)
         Ct = torch.zeros_like(CS)
         P = (eye - rS.unsqueeze(-1) * rS.unsqueeze(-2)) * vS[..., None, None]
-        W = lambda2 * P
-        w = lambda2 * (P @ CS.unsqueeze(-1)).squeeze(-1)
+        lam = _per_image(lambda2, b, j, n, r)
+        W = lam[..., None, None] * P
+        w = lam[..., None] * (P @ CS.unsqueeze(-1)).squeeze(-1)
     V = V * active.unsqueeze(-1)
     if x_prior is not None:
         if eps is None:

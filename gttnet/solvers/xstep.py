@@ -195,15 +195,20 @@ def _solve(
     visible: ArrayIn,
     *,
     lambda1: float,
-    lambda2: float | None,
+    lambda2: float | ArrayIn | None,
     method: str,
     x_prior: ArrayIn | None,
     prior_weight: float,
 ) -> torch.Tensor:
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-    if lambda1 < 0 or (lambda2 is not None and lambda2 <= 0):
-        raise ValueError(f"need lambda1 >= 0 and lambda2 > 0 (or None), got {lambda1}, {lambda2}")
+    lam: torch.Tensor | None = None
+    if lambda2 is not None:
+        lam = torch.as_tensor(lambda2, dtype=torch.float64).detach()
+        if not bool(torch.all(lam > 0)) or not bool(torch.all(torch.isfinite(lam))):
+            raise ValueError(f"need lambda2 > 0 and finite (or None), got {lambda2}")
+    if lambda1 < 0:
+        raise ValueError(f"need lambda1 >= 0, got {lambda1}")
     A3, C, r, vis, xp, batched = _as_inputs(A, centers, rays, visible, x_prior)
     if (A3.detach() < 0).any():
         raise ValueError("A must be non-negative")
@@ -222,7 +227,7 @@ def _solve(
         with torch.no_grad():  # a constant in backward
             diag = _structure_diagonal(A3, lambda1)
             eps = prior_weight * (diag.mean(-1) + 1e-12)
-    sys = build_system(C, r, vis, lambda2=lambda2, x_prior=xp, eps=eps)
+    sys = build_system(C, r, vis, lambda2=lam, x_prior=xp, eps=eps)
     X = (
         solve_sparse(A3, lambda1, sys)
         if method == "sparse"
@@ -238,7 +243,7 @@ def solve_structure(
     visible: ArrayIn,
     *,
     lambda1: float = 0.1,
-    lambda2: float | None = None,
+    lambda2: float | ArrayIn | None = None,
     method: str = "auto",
     x_prior: ArrayIn | None = None,
     prior_weight: float = 1e-6,
@@ -270,7 +275,8 @@ def solve_structure(
         rays: Viewing rays in world, shape ``(N, J, 3)`` or ``(B, N, J, 3)``; normalised here.
         visible: Observed-joint mask, shape ``(N, J)`` or ``(B, N, J)``.
         lambda1: Weight of the symmetric Laplacian term (0.1 in GTT-Net training, 0.0015 in DLOE).
-        lambda2: Ray weight; None for the pinned limit lambda2 -> inf.
+        lambda2: Ray weight: a number, or one per image (shape ``(N,)``, batched ``(B, N)``: e.g. the
+            noise-aware weight at each image's own depth); None for the pinned limit lambda2 -> inf.
         method: ``"auto"``, ``"dense"`` or ``"sparse"``.
         x_prior: Optional fallback structure (e.g. X_init), metres, shape ``(N, J, 3)`` or ``(B, N, J, 3)``.
         prior_weight: Relative ridge weight toward ``x_prior``.
