@@ -71,6 +71,10 @@ class KeypointFormatError(GttDataError):
     """A 2-D detector output (OpenPose, DeepLabCut, SLEAP, COCO/MMPose) is malformed or inconsistent."""
 
 
+class NoDetectionsError(KeypointFormatError):
+    """A keypoint source that holds no detection at all (a camera that never saw anyone)."""
+
+
 class CalibrationError(RigError):
     """A calibration file is malformed, in unknown units, or disagrees with the keypoint sources."""
 

@@ -36,7 +36,7 @@ from gttdata.calibration import load_calibration, undistort_points
 from gttdata.cameras import CameraRig
 from gttdata.capture.views import SEQUENCING, Observations
 from gttdata.detectors import Keypoints2D, read_keypoints
-from gttdata.errors import CalibrationError, KeypointFormatError
+from gttdata.errors import CalibrationError, KeypointFormatError, NoDetectionsError
 from gttdata.skeleton import Skeleton, cmu31
 
 __all__ = [
@@ -301,10 +301,14 @@ class Recording:
     def load(cls, spec: RecordingSpec) -> Recording:
         """Read the calibration, every keypoint source and its timing, and check they agree.
 
+        A camera whose source holds no detection at all (e.g. it never saw the subject) is left out with a
+        warning; the others are reconstructed as usual.
+
         Raises:
             CalibrationError: A camera name that the calibration does not have.
             KeypointFormatError: A malformed source, joint names differing between cameras, or a
                 timestamp file shorter than its keypoint source.
+            NoDetectionsError: No camera has a single detection.
         """
         rig, units = load_calibration(spec.calibration, units=spec.calibration_units)
         by_name = {c.name: c for c in rig.cameras}
@@ -314,6 +318,7 @@ class Recording:
         if len(set(names_seen)) != len(names_seen):
             raise KeypointFormatError(f"camera names must be unique, got {names_seen}")
         cams, kps, times, fps = [], [], [], []
+        empty: list[str] = []
         joint_names = None
         for c in spec.cameras:
             if c.name not in by_name:
@@ -321,7 +326,12 @@ class Recording:
                     f"{c.keypoints}: camera {c.name!r} is not in calibration {spec.calibration} "
                     f"(its cameras: {', '.join(by_name)}); name the camera as NAME=PATH or in the project file"
                 )
-            kp = read_keypoints(c.keypoints, spec.keypoint_format)
+            try:
+                kp = read_keypoints(c.keypoints, spec.keypoint_format)
+            except NoDetectionsError as exc:  # a camera that never saw anyone adds nothing: leave it out
+                empty.append(str(exc))
+                log.warning("%s; camera %r left out", exc, c.name)
+                continue
             if joint_names is None:
                 joint_names, first = kp.joint_names, kp
             elif kp.joint_names != joint_names:
@@ -348,7 +358,11 @@ class Recording:
             kps.append(kp)
             times.append(t)
             fps.append(rate)
-        assert joint_names is not None  # set by the first camera; a project has at least one
+        if joint_names is None:
+            raise NoDetectionsError(
+                f"no camera has a detection: {empty[0]}"
+                + (f" (and {len(empty) - 1} more)" if len(empty) > 1 else "")
+            )
         sk = _skeleton(joint_names, spec.skeleton, kps[0].keypoint_set)
         return cls(
             rig=CameraRig(tuple(cams)),

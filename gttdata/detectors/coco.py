@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gttdata.detectors import Keypoints2D, keypoint_set_for
-from gttdata.errors import KeypointFormatError
+from gttdata.errors import KeypointFormatError, NoDetectionsError
 
 __all__ = ["SUMMARY", "read_coco", "write_coco"]
 
@@ -106,7 +106,7 @@ def read_coco(path: Path) -> Keypoints2D:
             f"with 'instance_info'; found {type(doc).__name__}"
         )
     if not rows:
-        raise KeypointFormatError(f"{path}: no detections in the file")
+        raise NoDetectionsError(f"{path}: no detections in the file")
     frames = sorted(rows)
     counts = {rows[f][0].shape[0] for f in frames}
     if len(counts) != 1:

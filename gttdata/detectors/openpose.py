@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gttdata.detectors import Keypoints2D, keypoint_set_for
-from gttdata.errors import KeypointFormatError
+from gttdata.errors import KeypointFormatError, NoDetectionsError
 
 __all__ = ["SUMMARY", "read_openpose", "write_openpose", "frame_number"]
 
@@ -90,7 +90,7 @@ def read_openpose(folder: Path) -> Keypoints2D:
                 )
         rows.append(arr)
     if n_joints is None:
-        raise KeypointFormatError(f"{folder}: no person detected in any of the {len(files)} files")
+        raise NoDetectionsError(f"{folder}: no person detected in any of the {len(files)} files")
     xy = np.full((len(rows), n_joints, 2), np.nan)
     score = np.full((len(rows), n_joints), np.nan)
     for i, arr in enumerate(rows):

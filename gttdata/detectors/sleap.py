@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from gttdata.detectors import Keypoints2D
-from gttdata.errors import KeypointFormatError
+from gttdata.errors import KeypointFormatError, NoDetectionsError
 
 __all__ = ["SUMMARY", "read_sleap"]
 
@@ -57,7 +57,7 @@ def read_sleap(path: Path) -> Keypoints2D:
             if f not in rows or total > rows[f][1]:
                 rows[f] = (a, total)
     if not rows:
-        raise KeypointFormatError(f"{path}: no labelled frames for video {video.filename!r}")
+        raise NoDetectionsError(f"{path}: no labelled frames for video {video.filename!r}")
     frames = sorted(rows)
     a = np.stack([rows[f][0] for f in frames])
     if a.shape[1] != len(names):

@@ -113,3 +113,39 @@ def test_detector_keypoint_set_maps_onto_its_skeleton(tmp_path, scene_factory):
         KeypointFormatError, match="skeleton 'body25' has 25 joints but the keypoint sources have 17"
     ):
         Recording.load(dataclasses.replace(spec, skeleton="body25"))
+
+
+def _empty_openpose(folder) -> None:
+    """Rewrite every OpenPose file of a camera folder with no person in it."""
+    import json
+
+    for f in folder.glob("*.json"):
+        doc = json.loads(f.read_text())
+        doc["people"] = []
+        f.write_text(json.dumps(doc))
+
+
+def test_a_camera_that_never_saw_anyone_is_left_out(tmp_path, sample, caplog):
+    spec = load_project(export_capture(sample, tmp_path / "rec", fmt="openpose"))
+    _empty_openpose(tmp_path / "rec" / "cam_1")
+    with caplog.at_level("WARNING", logger="gttdata.recording"):
+        rec = Recording.load(spec)
+    assert rec.camera_names == ("cam_0", "cam_2")
+    assert "cam_1: no person detected in any of the 8 files; camera 'cam_1' left out" in caplog.text
+    view = rec.view()
+    obs, gt = make_view(sample, "partial")
+    kept = obs.cam_id != 1
+    np.testing.assert_array_equal(view.observations.keypoints_px, obs.keypoints_px[kept].astype(np.float64))
+    np.testing.assert_array_equal(ground_truth_for(view, spec.ground_truth), gt.points3d[kept])
+
+
+def test_no_camera_with_a_detection_is_one_line(tmp_path, sample):
+    from gttdata.errors import NoDetectionsError
+
+    spec = load_project(export_capture(sample, tmp_path / "rec", fmt="openpose"))
+    for v in range(3):
+        _empty_openpose(tmp_path / "rec" / f"cam_{v}")
+    with pytest.raises(
+        NoDetectionsError, match=r"^no camera has a detection: .*cam_0: no person detected .* \(and 2 more\)$"
+    ):
+        Recording.load(spec)
