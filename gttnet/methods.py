@@ -43,6 +43,7 @@ __all__ = [
     "available_methods",
     "method_spec",
     "check_sequencing",
+    "blank_unobserved",
 ]
 
 log = logging.getLogger(__name__)
@@ -260,11 +261,18 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
         )
     log.info("%s (%s): %d images in %.2f s", method, obs.sequencing, obs.n_images, seconds)
     rec = replace(rec, order=order, seconds=seconds, method=method, sequencing=obs.sequencing)
-    return _blank_unobserved(rec, obs, unseen) if unseen.any() else rec
+    return blank_unobserved(rec, obs)
 
 
-def _blank_unobserved(rec: Reconstruction, obs: Observations, unseen: np.ndarray) -> Reconstruction:
-    """NaN for the joints no image observes (a method's value for them would be made up), with a warning."""
+def blank_unobserved(rec: Reconstruction, obs: Observations) -> Reconstruction:
+    """NaN for the joints no image of ``obs`` observes (a method's value for them would be made up).
+
+    Warns naming them and lists them in ``info["unobserved_joints"]``; ``rec`` unchanged when every joint
+    is observed somewhere.
+    """
+    unseen = ~np.asarray(obs.visible, dtype=bool).any(axis=0)
+    if not unseen.any():
+        return rec
     names = [obs.skeleton.joint_names[j] for j in np.flatnonzero(unseen)]
     log.warning(
         "%s: %s %s missing in every image: 3D left NaN",

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gttdata.capture.views import Observations
-from gttnet.methods import Reconstruction, check_sequencing, method_spec
+from gttnet.methods import Reconstruction, blank_unobserved, check_sequencing, method_spec
 
 __all__ = [
     "AUTO_MIN_IMAGES",
@@ -270,7 +270,7 @@ def reconstruct_windowed(
     from tqdm import tqdm
 
     X = np.zeros((n, obs.n_joints, 3))
-    wsum = np.zeros(n)
+    wsum = np.zeros((n, obs.n_joints))
     best_w = np.full(n, -1.0)
     key = np.zeros(n)
     bar = tqdm(
@@ -293,8 +293,10 @@ def reconstruct_windowed(
         win = plan.window(w)
         srt = np.argsort(win)
         weight = plan.weights(w)[srt[np.searchsorted(win[srt], rows)]]
-        X[rows] += weight[:, None, None] * np.asarray(rec.points3d)
-        wsum[rows] += weight
+        P = np.asarray(rec.points3d)
+        ok = np.isfinite(P).all(axis=-1)  # a joint a window left NaN (e.g. HPF: too few rays) is not blended
+        X[rows] += np.where(ok[..., None], weight[:, None, None] * P, 0.0)
+        wsum[rows] += weight[:, None] * ok
         rank = _local_rank(rec, t_hat[rows])
         better = weight > best_w[rows]
         key[rows[better]] = plan.starts[w] + rank[better]
@@ -303,7 +305,8 @@ def reconstruct_windowed(
         bar.update(max(new, 0))
         done += max(new, 0)
     bar.close()
-    X /= wsum[:, None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        X = np.where((wsum > 0)[..., None], X / wsum[..., None], np.nan)
     order = np.empty(n, dtype=np.int64)
     order[np.lexsort((t_hat, key))] = np.arange(n)
     info = {
@@ -313,7 +316,7 @@ def reconstruct_windowed(
         "clock": clock,
         "seconds_per_window": (time.perf_counter() - t_win) / len(plan),
     }
-    return Reconstruction(
+    rec = Reconstruction(
         points3d=X,
         affinity=None,
         order=order,
@@ -322,3 +325,4 @@ def reconstruct_windowed(
         sequencing=obs.sequencing,
         info=info,
     )
+    return blank_unobserved(rec, obs)

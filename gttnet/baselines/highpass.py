@@ -134,12 +134,31 @@ def fit_highpass(
     ab = _banded_systems(P, lam, order, timestamp_s)
     rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
     X = np.full((n, J, 3), np.nan)
-    for j in range(J):
+    pinned = _pinned_by_rays(P, order, timestamp_s)
+    for j in np.flatnonzero(pinned):
         try:
             X[:, j] = solveh_banded(ab[j], rhs[j]).reshape(n, 3)
         except LinAlgError:
             log.debug("hpf: joint %d is undetermined (%d rays)", j, int(visible[:, j].sum()))
     return X
+
+
+def _pinned_by_rays(P: np.ndarray, order: int, timestamp_s: np.ndarray | None) -> np.ndarray:
+    """Whether each joint's rays fix the trajectories the prior does not penalise, shape ``(J,)`` bool.
+
+    The ``order``-th difference is blind to polynomials of degree < ``order`` in time (or in the image index
+    when evenly spaced); a joint is determined only if its ray projectors, summed against that basis, leave
+    none of those ``3 * order`` directions free. A Cholesky factorisation cannot be trusted to say so: with
+    no ray at all the system is exactly singular, yet rounding can leave every pivot positive.
+    """
+    n = P.shape[0]
+    s = np.arange(n, dtype=np.float64) if timestamp_s is None else np.asarray(timestamp_s, dtype=np.float64)
+    span = float(s.max() - s.min()) if n > 1 else 0.0
+    s = (s - s.min()) / span if span > 0 else np.zeros(n)
+    B = s[:, None] ** np.arange(order)[None, :]  # (N, order)
+    N = np.einsum("na,nb,njcd->jacbd", B, B, P).reshape(P.shape[1], 3 * order, 3 * order)
+    ev = np.linalg.eigvalsh(N)
+    return np.asarray(ev[:, 0] > 1e-9 * np.maximum(ev[:, -1], 1e-300), dtype=bool)
 
 
 def _cross_validate(

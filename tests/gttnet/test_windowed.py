@@ -123,3 +123,36 @@ def test_partial_windows_follow_recovered_clocks(scene_factory):
     rec = reconstruct_windowed(obs, "pseudo", window=60, overlap=16)
     assert rec.info["clock"] == "recovered clocks"
     assert kendall_tau(rec.order, np.argsort(np.argsort(t_true))) > 0.85
+
+
+def test_a_window_that_leaves_a_joint_nan_does_not_blank_its_neighbours(scene_factory):
+    """HPF leaves a joint NaN in a window that has no ray of it; overlapping windows that do still count."""
+    import dataclasses
+
+    sample = scene_factory(n_cameras=4, n_joints=6, frames_per_camera=40, sigma_px=1.0, seed=8)
+    obs, gt = make_view(sample, "full")
+    vis = obs.visible.copy()
+    t = obs.timestamp_s
+    early = t < np.quantile(t, 0.4)
+    vis[early, 2] = False  # joint 2 unseen through the first 40 % of the capture
+    obs = dataclasses.replace(obs, visible=vis)
+    rec = reconstruct_windowed(obs, "hpf", window=48, overlap=16, lam=10.0)
+    nan = np.isnan(rec.points3d[:, 2]).any(axis=-1)
+    assert nan.any() and not nan[~early].any()  # only images no window could place are NaN
+    assert np.isfinite(np.delete(rec.points3d, 2, axis=1)).all()
+    seen = ~nan
+    assert mpjpe_mm(rec.points3d[seen][:, [2]], gt.points3d[seen][:, [2]]) < 50.0
+
+
+def test_windowed_blanks_a_joint_no_image_observes(scene_factory):
+    import dataclasses
+
+    sample = scene_factory(n_cameras=4, n_joints=6, frames_per_camera=40, sigma_px=1.0, seed=9)
+    obs, _ = make_view(sample, "full")
+    vis = obs.visible.copy()
+    vis[:, 4] = False
+    rec = reconstruct_windowed(dataclasses.replace(obs, visible=vis), "pseudo", window=48, overlap=16)
+    assert np.isnan(rec.points3d[:, 4]).all() and rec.info["unobserved_joints"] == [
+        obs.skeleton.joint_names[4]
+    ]
+    assert np.isfinite(np.delete(rec.points3d, 4, axis=1)).all()
