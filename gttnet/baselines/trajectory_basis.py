@@ -98,12 +98,18 @@ def fit_trajectory_basis(
         weight: Per-observation weight of each ray residual, shape ``(N, J)``, or None (all 1).
 
     Returns:
-        Joints in world, metres, shape ``(N, J, 3)``.
+        Joints in world, metres, shape ``(N, J, 3)``. A joint whose rays do not pin down even a straight-line
+        trajectory (the first ``min(k, 2)`` basis functions; e.g. seen in one or two images, or never) is
+        NaN: the ridge alone would place it anywhere.
     """
     theta = dct_basis(timestamp_s, k)
     M, b = _normal_equations(theta, ray_projectors(rays, visible, weight), centers)
     beta = _solve(M, b, k, ridge)
-    return np.einsum("nk,jka->nja", theta, beta)
+    X = np.einsum("nk,jka->nja", theta, beta)
+    m0 = 3 * min(k, 2)
+    ev = np.linalg.eigvalsh(M[:, :m0, :m0])
+    X[:, ev[:, 0] <= 1e-9 * np.maximum(ev[:, -1], 1e-300)] = np.nan
+    return X
 
 
 def _cross_validate(
@@ -179,9 +185,15 @@ def reconstruct_dct(
     X = fit_trajectory_basis(t, centers, rays, vis, k=k, ridge=ridge, weight=weight)
     A = temporal_chain_affinity(t)
     log.debug("dct: k=%d (cv %s)", k, cv)
-    return Reconstruction(
-        points3d=X,
-        affinity=A,
-        order=spectral_order(A),
-        info={"k": int(k), "cv_ray_error_m": {str(a): b for a, b in cv.items()}},
-    )
+    info: dict = {"k": int(k), "cv_ray_error_m": {str(a): b for a, b in cv.items()}}
+    lost = np.flatnonzero(np.isnan(X).any(axis=(0, 2)) & vis.any(axis=0))
+    if lost.size:
+        names = [obs.skeleton.joint_names[j] for j in lost]
+        log.warning(
+            "dct: %s %s seen in too few images to fix a trajectory (%s observations): left NaN",
+            "joints" if len(names) > 1 else "joint",
+            ", ".join(names),
+            ", ".join(str(int(vis[:, j].sum())) for j in lost),
+        )
+        info["undetermined_joints"] = names
+    return Reconstruction(points3d=X, affinity=A, order=spectral_order(A), info=info)

@@ -242,18 +242,26 @@ def test_no_joint_observed_is_one_clear_error(scene):
         reconstruct(dataclasses.replace(obs, visible=np.zeros_like(obs.visible)), "pseudo")
 
 
-def test_hpf_leaves_an_undetermined_joint_nan(scene, caplog):
-    """One ray cannot fix an acceleration-penalised trajectory: that joint is NaN, the rest are solved."""
+@pytest.mark.parametrize(
+    ("method", "options", "logger"),
+    [
+        ("hpf", {"lam": 10.0}, "gttnet.baselines.highpass"),
+        ("dct", {"k": 6}, "gttnet.baselines.trajectory_basis"),
+    ],
+)
+@pytest.mark.parametrize("n_seen", [1, 2])
+def test_a_trajectory_prior_leaves_an_undetermined_joint_nan(scene, caplog, method, options, logger, n_seen):
+    """One or two rays cannot fix a straight-line trajectory: that joint is NaN, the rest are solved."""
     obs, gt = make_view(scene, "full")
-    seen = int(np.flatnonzero(obs.visible[:, 2])[0])
-    with caplog.at_level("WARNING", logger="gttnet.baselines.highpass"):
-        rec = reconstruct(_hide(obs, 2, keep_images=[seen]), "hpf", lam=10.0)
+    seen = np.flatnonzero(obs.visible[:, 2])[:: max(1, obs.n_images // 3)][:n_seen]
+    with caplog.at_level("WARNING", logger=logger):
+        rec = reconstruct(_hide(obs, 2, keep_images=seen), method, **options)
     assert np.isnan(rec.points3d[:, 2]).all()
     assert np.isfinite(np.delete(rec.points3d, 2, axis=1)).all()
     assert rec.info["undetermined_joints"] == [obs.skeleton.joint_names[2]]
-    assert "(1 observations): left NaN" in caplog.text
+    assert f"({n_seen} observations): left NaN" in caplog.text
     # the joint with all its rays is solved as before
-    assert np.allclose(rec.points3d[:, 0], reconstruct(obs, "hpf", lam=10.0).points3d[:, 0])
+    assert np.allclose(rec.points3d[:, 0], reconstruct(obs, method, **options).points3d[:, 0])
 
 
 def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
