@@ -232,3 +232,29 @@ def test_median_plots(tiny_run, tmp_path):
     assert "interquartile" in summary_markdown(rows, statistic="median")
     with pytest.raises(EvalRecipeError, match="plot_statistic"):
         parse_eval_recipe(_tiny(tmp_path, plot_statistic="mode"))
+
+
+def test_a_reconstruction_with_nan_joints_is_counted_apart(tmp_path, monkeypatch):
+    """A method that cannot place a joint is not scored as if it had: its row says which joints and why."""
+    import gttnet.methods
+    from gttnet.methods import Reconstruction, available_methods, register_method
+
+    available_methods()
+    monkeypatch.setattr(gttnet.methods, "_REGISTRY", dict(gttnet.methods._REGISTRY))
+
+    @register_method("_test_half", requires="none")
+    def _half(obs):
+        from gttnet.baselines.pseudo import reconstruct_pseudo
+
+        X = reconstruct_pseudo(obs).points3d.copy()
+        X[:, 1] = np.nan
+        return Reconstruction(points3d=X)
+
+    data = _tiny(tmp_path, methods=["pseudo", "_test_half"], sequencing=["none"])
+    data["sweeps"] = [{"name": "noise", "variable": "capture.sigma_px", "values": [1]}]
+    out = evaluate(parse_eval_recipe(data), progress=False)
+    rows = {r["method"]: r for r in read_rows(out / "errors.csv")}
+    assert rows["pseudo"]["status"] == "ok"
+    half = rows["_test_half"]
+    assert half["status"] == "error" and half["mpjpe_mm"] == ""
+    assert half["note"].startswith("joints left NaN (too few observations): ")
