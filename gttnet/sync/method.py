@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -13,7 +14,14 @@ from gttnet.methods import Reconstruction, register_method
 from gttnet.sync.clocks import apply_clocks, clock_times
 from gttnet.sync.recover import recover_clocks
 
-__all__ = ["AUTO", "SOLVERS", "reconstruct_auto", "reconstruct_sync"]
+__all__ = [
+    "AUTO",
+    "SOLVERS",
+    "count_rates",
+    "reconstruct_auto",
+    "reconstruct_stream_sync",
+    "reconstruct_sync",
+]
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +94,63 @@ def reconstruct_sync(
             "solve_seconds": inner.seconds,
         },
     )
+
+
+def count_rates(cam_id: np.ndarray, top_hz: float = 30.0) -> dict[int, float]:
+    """Relative frame rates from image counts: ``top_hz`` times each camera's share of the busiest camera's.
+
+    Right when every camera filmed the same span (only the ratios matter to clock recovery; the offsets
+    are then in units of that nominal scale).
+    """
+    cams, counts = np.unique(np.asarray(cam_id), return_counts=True)
+    return {int(c): top_hz * float(k) / float(counts.max()) for c, k in zip(cams, counts, strict=True)}
+
+
+@register_method(
+    "stream-sync",
+    requires="none",
+    summary="no sequencing needed: order each camera's frames by pose, then recover clocks and solve as sync",
+)
+def reconstruct_stream_sync(
+    obs: Observations,
+    *,
+    fps: float | Sequence[float] | Mapping[int, float] | None = None,
+    order_k: int = 32,
+    solver: str = "hpf",
+) -> Reconstruction:
+    """``sync`` on camera streams estimated from the poses, for captures with no timing at all.
+
+    Without sequencing, each camera's frames are put in the order of the spectral order of a pose graph
+    over the pseudo-triangulated poses (:func:`gttnet.model.inputs.order_streams`, ``order_k`` links per
+    image; within one camera consecutive frames lie several global images apart, so this per-camera order
+    is far more often right than the global one). Then the cameras' clocks are recovered and the
+    high-pass-filter prior solves on the recovered times, as :func:`reconstruct_sync` does. Given streams
+    (``partial``, ``full``) are used as they are.
+
+    Works where the motion does not come back to the same poses: a periodic motion (walking on the spot)
+    or a failed pseudo-triangulation leaves the per-camera order wrong, and the smoothness prior then ties
+    together moments that are not neighbours (docs/MODEL_CARD.md has the validation numbers).
+
+    Args:
+        obs: Observations of any sequencing condition.
+        fps: Nominal frame rate per camera; None: :func:`count_rates` (the cameras are assumed to film the
+            same span).
+        order_k: Links per image of the pose graph that orders the streams.
+        solver: Full-sequencing solver after clock recovery (see :data:`SOLVERS`).
+
+    Returns:
+        :func:`reconstruct_sync`'s reconstruction, in the input's image order; ``info["streams_estimated"]``
+        says whether the streams were estimated.
+    """
+    from gttnet.geometry.triangulation import pseudo_triangulate
+    from gttnet.model.inputs import order_streams
+
+    view = obs
+    if obs.sequencing == "none":
+        pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+        view = order_streams(obs, pt.X_init, k=order_k)
+    rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
+    return replace(rec, info={**rec.info, "streams_estimated": obs.sequencing == "none"})
 
 
 #: What ``auto`` runs under each sequencing condition: the most accurate method of the project's own
