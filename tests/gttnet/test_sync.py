@@ -297,16 +297,28 @@ def test_sync_method_matches_hpf_given_true_timestamps(capture):
 def test_auto_picks_by_sequencing(capture):
     from gttnet.methods import reconstruct
 
-    for seq, ran in (("full", "hpf"), ("partial", "sync"), ("none", "dloe")):
+    rates = {0: 25.0, 1: 30.0, 2: 60.0}
+    for seq, ran in (("full", "hpf"), ("partial", "sync"), ("none", "stream-sync")):
         obs, _ = make_view(capture, seq)
-        opts = {"fps": {0: 25.0, 1: 30.0, 2: 60.0}} if seq == "partial" else {}
+        opts = {"fps": rates} if seq != "full" else {}
         if seq == "none":
-            opts["max_iter"] = 2  # not an auto option: refused like any unknown option
             with pytest.raises(ValueError, match="has no option 'max_iter'"):
-                reconstruct(obs, "auto", **opts)
-            opts = {}
+                reconstruct(obs, "auto", max_iter=2)  # not an auto option: refused like any unknown option
         rec = reconstruct(obs, "auto", **opts)
         assert rec.method == "auto" and rec.info["method_ran"] == ran
+
+
+def test_auto_without_sequencing_keeps_dloe_when_the_clocks_do_not_explain_the_images(capture):
+    """Without the true rates (the cameras film different spans here) the clocks fail the check: DLOE runs."""
+    from gttnet.methods import reconstruct
+    from gttnet.sync.method import STREAM_SYNC_MAX_RMS_PX
+
+    obs, _ = make_view(capture, "none")
+    rec = reconstruct(obs, "auto")
+    assert rec.info["method_ran"] == "dloe" and rec.info["clock_rms_px"] > STREAM_SYNC_MAX_RMS_PX
+    np.testing.assert_allclose(rec.points3d, reconstruct(obs, "dloe").points3d)
+    kept = reconstruct(obs, "stream-sync", fallback=None)
+    assert kept.info["method_ran"] == "stream-sync" and kept.info["clock_rms_px"] == rec.info["clock_rms_px"]
 
 
 def test_simulated_views_carry_each_cameras_own_clock():
