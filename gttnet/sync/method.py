@@ -156,13 +156,17 @@ def reconstruct_stream_sync(
         :func:`reconstruct_sync`'s reconstruction, or the fallback's, in the input's image order. ``info``
         adds ``streams_estimated``, ``clock_rms_px`` and ``method_ran`` (``stream-sync`` or the fallback).
     """
+    from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
     from gttnet.geometry.triangulation import pseudo_triangulate
     from gttnet.model.inputs import order_streams
 
     view = obs
     if obs.sequencing == "none":
-        pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
-        view = order_streams(obs, pt.X_init, k=order_k)
+        args = (obs.centers(), obs.rays(), obs.visible, obs.cam_id)
+        # above DENSE_MAX_IMAGES the k-d tree candidate search: the exhaustive one is O(N^2 J) in memory
+        big = use_candidate_search("none", obs.n_images, "auto")
+        x_init = candidate_pseudo_triangulate(*args).X_init if big else pseudo_triangulate(*args).X_init
+        view = order_streams(obs, x_init, k=order_k)
     rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
     estimated = obs.sequencing == "none"
     rms = rec.info["clocks"].get("info", {}).get("rms_px")
