@@ -469,6 +469,9 @@ def reconstruct_cmd(
     from gttnet.methods import check_sequencing, method_spec, reconstruct
 
     method = method or _method_default()
+    if subjects > 1 and method == "auto":
+        # the clustering needs an affinity over the virtual images; auto's order-free choice returns none
+        method = "dloe"
     window_arg = _window_arg(window)
     try:
         spec_m = method_spec(method)

@@ -136,9 +136,7 @@ def test_reconstruct_two_subjects(tmp_path):
         "reconstruct",
         tmp_path / "ms",
         "--subjects",
-        2,
-        "--method",
-        "dloe",
+        2,  # the default method: auto means DLOE here (the clustering needs its affinity)
         "--json",
         "--out",
         tmp_path / "r.h5",
