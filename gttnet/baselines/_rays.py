@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
-__all__ = ["ray_projectors", "ray_residuals", "image_folds"]
+__all__ = ["ray_projectors", "ray_residuals", "image_folds", "undetermined_joints"]
+
+log = logging.getLogger(__name__)
 
 
 def ray_projectors(rays: np.ndarray, visible: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
@@ -60,3 +64,30 @@ def image_folds(n: int, n_folds: int, *, seed: int = 0) -> list[np.ndarray]:
     shift = int(np.random.default_rng(seed).integers(n_folds))
     pos = (np.arange(n) + shift) % n_folds
     return [np.flatnonzero(pos == f) for f in range(n_folds)]
+
+
+def undetermined_joints(method: str, X: np.ndarray, visible: np.ndarray, joint_names) -> list[str]:
+    """Names of the observed joints a trajectory prior left NaN (too few rays), warned about once.
+
+    Args:
+        method: Method name for the warning.
+        X: The reconstruction, shape ``(N, J, 3)``.
+        visible: Observed-joint mask, shape ``(N, J)``.
+        joint_names: Name of each joint (J).
+
+    Returns:
+        The names, in joint order; empty when every observed joint was placed (joints no image observes
+        are the registry's to report).
+    """
+    vis = np.asarray(visible, dtype=bool)
+    lost = np.flatnonzero(np.isnan(X).any(axis=(0, 2)) & vis.any(axis=0))
+    names = [joint_names[j] for j in lost]
+    if names:
+        log.warning(
+            "%s: %s %s seen in too few images to fix a trajectory (%s observations): left NaN",
+            method,
+            "joints" if len(names) > 1 else "joint",
+            ", ".join(names),
+            ", ".join(str(int(vis[:, j].sum())) for j in lost),
+        )
+    return names

@@ -9,7 +9,7 @@ import scipy.sparse as sp
 from scipy.linalg import LinAlgError, solveh_banded
 
 from gttdata.capture.views import Observations
-from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
+from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals, undetermined_joints
 from gttnet.geometry.neighbours import temporal_chain_affinity
 from gttnet.methods import Reconstruction, register_method
 
@@ -271,16 +271,9 @@ def reconstruct_hpf(
     X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts, weight=weight)
     log.debug("hpf: lam=%g", lam)
     info: dict = {"lam": float(lam), "cv_ray_error_m": {f"{a:g}": b for a, b in cv.items()}}
-    lost = np.flatnonzero(np.isnan(X).any(axis=(0, 2)) & obs.visible.any(axis=0))
-    if lost.size:
-        names = [obs.skeleton.joint_names[j] for j in lost]
-        log.warning(
-            "hpf: %s %s seen in too few images to fix a trajectory (%s observations): left NaN",
-            "joints" if len(names) > 1 else "joint",
-            ", ".join(names),
-            ", ".join(str(int(obs.visible[:, j].sum())) for j in lost),
-        )
-        info["undetermined_joints"] = names
+    lost = undetermined_joints("hpf", X, obs.visible, obs.skeleton.joint_names)
+    if lost:
+        info["undetermined_joints"] = lost
     return Reconstruction(
         points3d=X, affinity=temporal_chain_affinity(np.asarray(obs.timestamp_s)), info=info
     )

@@ -7,7 +7,7 @@ import logging
 import numpy as np
 
 from gttdata.capture.views import Observations
-from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals
+from gttnet.baselines._rays import image_folds, ray_projectors, ray_residuals, undetermined_joints
 from gttnet.geometry.neighbours import temporal_chain_affinity
 from gttnet.geometry.ordering import spectral_order
 from gttnet.methods import Reconstruction, register_method
@@ -186,14 +186,7 @@ def reconstruct_dct(
     A = temporal_chain_affinity(t)
     log.debug("dct: k=%d (cv %s)", k, cv)
     info: dict = {"k": int(k), "cv_ray_error_m": {str(a): b for a, b in cv.items()}}
-    lost = np.flatnonzero(np.isnan(X).any(axis=(0, 2)) & vis.any(axis=0))
-    if lost.size:
-        names = [obs.skeleton.joint_names[j] for j in lost]
-        log.warning(
-            "dct: %s %s seen in too few images to fix a trajectory (%s observations): left NaN",
-            "joints" if len(names) > 1 else "joint",
-            ", ".join(names),
-            ", ".join(str(int(vis[:, j].sum())) for j in lost),
-        )
-        info["undetermined_joints"] = names
+    lost = undetermined_joints("dct", X, vis, obs.skeleton.joint_names)
+    if lost:
+        info["undetermined_joints"] = lost
     return Reconstruction(points3d=X, affinity=A, order=spectral_order(A), info=info)

@@ -245,8 +245,8 @@ def test_no_joint_observed_is_one_clear_error(scene):
 @pytest.mark.parametrize(
     ("method", "options", "logger"),
     [
-        ("hpf", {"lam": 10.0}, "gttnet.baselines.highpass"),
-        ("dct", {"k": 6}, "gttnet.baselines.trajectory_basis"),
+        ("hpf", {"lam": 10.0}, "gttnet.baselines._rays"),
+        ("dct", {"k": 6}, "gttnet.baselines._rays"),
     ],
 )
 @pytest.mark.parametrize("n_seen", [1, 2])
