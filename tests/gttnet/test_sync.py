@@ -383,3 +383,11 @@ def test_stream_sync_without_any_timing_approaches_sync_with_the_streams():
     same = reconstruct(part, "stream-sync", fps=rates)
     assert same.info["streams_estimated"] is False
     np.testing.assert_allclose(same.points3d, reconstruct(part, "sync", fps=rates).points3d)
+
+
+def test_auto_falls_back_on_gttnet_only_for_the_skeleton_its_model_was_trained_on(capture, scene_factory):
+    from gttnet.sync.method import order_free_fallback
+
+    assert order_free_fallback(make_view(capture, "none")[0]) == "dloe"  # a toy skeleton: DLOE
+    cmu = scene_factory(n_cameras=3, n_joints=31, frames_per_camera=4)
+    assert order_free_fallback(make_view(cmu, "none")[0]) == "gttnet"
