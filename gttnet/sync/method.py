@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from gttdata.capture.views import Observations
+from gttnet.errors import GttNetError
 from gttnet.methods import Reconstruction, register_method
 from gttnet.sync.clocks import apply_clocks, clock_times
 from gttnet.sync.recover import recover_clocks
@@ -141,8 +142,9 @@ def reconstruct_stream_sync(
     Works where the motion does not come back to the same poses: a periodic motion (walking on the spot)
     or a failed pseudo-triangulation leaves the per-camera order wrong, and the smoothness prior then ties
     together moments that are not neighbours. Such clocks do not explain the images: when the streams were
-    estimated and the recovered clocks leave a reprojection RMS above ``max_rms_px``, the ``fallback``
-    method (an order-free one) reconstructs the capture instead (README, "Synchronizing cameras after the
+    estimated and the recovered clocks leave a reprojection RMS above ``max_rms_px``, or the clocks cannot be
+    recovered at all (a camera with fewer than three images), the ``fallback`` method (an order-free one)
+    reconstructs the capture instead (README, "Synchronizing cameras after the
     fact", has the validation numbers).
 
     Args:
@@ -169,14 +171,23 @@ def reconstruct_stream_sync(
         big = use_candidate_search("none", obs.n_images, "auto")
         x_init = candidate_pseudo_triangulate(*args).X_init if big else pseudo_triangulate(*args).X_init
         view = order_streams(obs, x_init, k=order_k)
-    rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
     estimated = obs.sequencing == "none"
-    rms = rec.info["clocks"].get("info", {}).get("rms_px")
+    rec: Reconstruction | None = None
+    why = ""
+    try:
+        rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
+    except GttNetError as exc:  # e.g. a camera with too few images for clock recovery
+        if not (estimated and fallback is not None):
+            raise
+        why = str(exc)
+    rms = None if rec is None else rec.info["clocks"].get("info", {}).get("rms_px")
     checks = {"streams_estimated": estimated, "clock_rms_px": rms}
-    if estimated and fallback is not None and not (rms is not None and rms <= max_rms_px):
+    if rec is None or (estimated and fallback is not None and not (rms is not None and rms <= max_rms_px)):
         from gttnet.methods import reconstruct
 
-        log.info("stream-sync: clocks leave %s px RMS (> %g): %s instead", rms, max_rms_px, fallback)
+        assert fallback is not None  # rec is None only when a fallback was asked for
+        why = why or f"the clocks leave {rms} px RMS (> {max_rms_px:g})"
+        log.info("stream-sync: %s; %s instead", why, fallback)
         fb = reconstruct(obs, fallback)
         return Reconstruction(
             points3d=fb.points3d,

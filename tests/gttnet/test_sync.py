@@ -391,3 +391,15 @@ def test_auto_falls_back_on_gttnet_only_for_the_skeleton_its_model_was_trained_o
     assert order_free_fallback(make_view(capture, "none")[0]) == "dloe"  # a toy skeleton: DLOE
     cmu = scene_factory(n_cameras=3, n_joints=31, frames_per_camera=4)
     assert order_free_fallback(make_view(cmu, "none")[0]) == "gttnet"
+
+
+def test_stream_sync_falls_back_when_a_camera_has_too_few_images_for_clocks(capture):
+    from gttnet.methods import reconstruct
+
+    obs, _ = make_view(capture, "none", seed=1)
+    keep = np.flatnonzero(obs.cam_id != 2)
+    few = obs.take(np.r_[keep, np.flatnonzero(obs.cam_id == 2)[:2]])
+    rec = reconstruct(few, "auto")
+    assert rec.info["method_ran"] == "dloe" and rec.info["clock_rms_px"] is None
+    with pytest.raises(GttNetError, match="camera 2 has 2 image"):
+        reconstruct(few, "stream-sync", fallback=None)
