@@ -104,6 +104,11 @@ class Reconstruction:
         """Number of joints J."""
         return int(self.points3d.shape[1])
 
+    @property
+    def nan_joints(self) -> np.ndarray:
+        """Indices of the joints left NaN in some image (never observed, or too few rays), shape ``(K,)``."""
+        return np.flatnonzero(~np.isfinite(self.points3d).all(axis=(0, 2)))
+
 
 @dataclass(frozen=True)
 class MethodSpec:
@@ -242,8 +247,7 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
     spec = method_spec(method)
     check_sequencing(obs, spec)
     _check_options(spec, options)
-    unseen = np.asarray(~np.asarray(obs.visible, dtype=bool).any(axis=0), dtype=bool)
-    if unseen.all():
+    if not np.asarray(obs.visible, dtype=bool).any():
         raise GttNetError(
             f"reconstruct: no joint of the {obs.n_joints}-joint skeleton {obs.skeleton.name!r} is observed "
             f"in any of the {obs.n_images} images"

@@ -27,14 +27,11 @@ def _method_fields(rec) -> dict:
     after clock recovery, ``clock_offsets_s`` ({camera: s}). Where joints are NaN, ``mpjpe_mm`` is over
     the others.
     """
-    import numpy as np
-
     out: dict[str, Any] = {"method": rec.info.get("method_ran", rec.method)}
     if out["method"] != rec.method:
         out["requested_method"] = rec.method
-    lost = ~np.isfinite(rec.points3d).all(axis=(0, 2))
-    if lost.any():
-        out["nan_joints"] = [int(j) for j in np.flatnonzero(lost)]
+    if rec.nan_joints.size:
+        out["nan_joints"] = rec.nan_joints.tolist()
     if "clock_offsets_s" in rec.info:
         out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
     return out
@@ -60,14 +57,14 @@ class MethodChoice(click.Choice):
         pass
 
 
-def _mpjpe_reconstructed(points3d, gt_points) -> float:
-    """MPJPE (mm) over the joints the method reconstructed: a joint left NaN everywhere is not scored."""
+def _mpjpe_reconstructed(rec, gt_points) -> float:
+    """MPJPE (mm) over the joints the method reconstructed: the joints it left NaN are not scored."""
     import numpy as np
 
     from gttnet.evaluate.metrics import mpjpe_mm
 
-    keep = np.isfinite(points3d).all(axis=(0, 2))
-    return mpjpe_mm(points3d[:, keep], gt_points[:, keep]) if keep.any() else float("nan")
+    keep = np.setdiff1d(np.arange(rec.n_joints), rec.nan_joints)
+    return mpjpe_mm(rec.points3d[:, keep], gt_points[:, keep]) if keep.size else float("nan")
 
 
 def _report(loaded, rec) -> dict:
@@ -87,7 +84,7 @@ def _report(loaded, rec) -> dict:
     out.update(_method_fields(rec))
     gt = loaded.ground_truth
     if gt is not None:
-        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec.points3d, gt.points3d), 4)
+        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt.points3d), 4)
         if rec.order is not None and np.all(gt.global_order >= 0):
             out["order_kendall_tau"] = round(kendall_tau(rec.order, gt.global_order), 4)
     return out
@@ -564,7 +561,7 @@ def _report_recording(view, rec, gt_points) -> dict:
         out["windows"] = rec.info["windows"]
     out.update(_method_fields(rec))
     if gt_points is not None:
-        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec.points3d, gt_points), 4)
+        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt_points), 4)
     return out
 
 

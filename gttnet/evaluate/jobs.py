@@ -162,9 +162,10 @@ def run_job(recipe: EvalRecipe, job: Job, todo: frozenset[tuple[str, str]] | Non
                 log.warning("%s %s %s: %s", job.job_id, seq, entry.name, exc)
                 rows.append(make_row(job, seq, entry.name, obs.n_images, status="error", note=str(exc)[:200]))
                 continue
-            lost = ~np.isfinite(rec.points3d).all(axis=(0, 2))
-            if lost.any():  # not comparable with a full reconstruction: counted apart, with the reason
-                names = ", ".join(obs.skeleton.joint_names[j] for j in np.flatnonzero(lost))
+            if (
+                rec.nan_joints.size
+            ):  # not comparable with a full reconstruction: counted apart, with the reason
+                names = ", ".join(obs.skeleton.joint_names[j] for j in rec.nan_joints)
                 note = f"joints left NaN (too few observations): {names}"[:200]
                 rows.append(make_row(job, seq, entry.name, obs.n_images, status="error", note=note))
                 continue

@@ -171,21 +171,21 @@ def reconstruct_stream_sync(
         big = use_candidate_search("none", obs.n_images, "auto")
         x_init = candidate_pseudo_triangulate(*args).X_init if big else pseudo_triangulate(*args).X_init
         view = order_streams(obs, x_init, k=order_k)
-    estimated = obs.sequencing == "none"
+    checked = obs.sequencing == "none" and fallback is not None  # only estimated streams are checked
     rec: Reconstruction | None = None
     why = ""
     try:
         rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
     except GttNetError as exc:  # e.g. a camera with too few images for clock recovery
-        if not (estimated and fallback is not None):
+        if not checked:
             raise
         why = str(exc)
     rms = None if rec is None else rec.info["clocks"].get("info", {}).get("rms_px")
-    checks = {"streams_estimated": estimated, "clock_rms_px": rms}
-    if rec is None or (estimated and fallback is not None and not (rms is not None and rms <= max_rms_px)):
+    checks = {"streams_estimated": obs.sequencing == "none", "clock_rms_px": rms}
+    if checked and not (rms is not None and rms <= max_rms_px):  # rec None: rms None too
         from gttnet.methods import reconstruct
 
-        assert fallback is not None  # rec is None only when a fallback was asked for
+        assert fallback is not None  # checked implies it
         why = why or f"the clocks leave {rms} px RMS (> {max_rms_px:g})"
         log.info("stream-sync: %s; %s instead", why, fallback)
         fb = reconstruct(obs, fallback)
@@ -195,6 +195,7 @@ def reconstruct_stream_sync(
             order=fb.order,
             info={**fb.info, **checks, "method_ran": fallback},
         )
+    assert rec is not None  # without a check, a failed recovery was raised above
     return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
 
 
