@@ -8,7 +8,10 @@ from pathlib import Path
 import torch
 import torch.distributed as dist
 
-__all__ = ["select_device", "setup", "agree_on_path", "wrap", "check_replicas"]
+__all__ = ["select_device", "setup", "teardown", "agree_on_path", "wrap", "check_replicas"]
+
+#: Whether :func:`setup` created the process group (only then does :func:`teardown` destroy it).
+_OWNED = False
 
 
 def select_device(name: str, *, local_rank: int = 0) -> torch.device:
@@ -33,11 +36,27 @@ def setup(device_name: str) -> tuple[int, int, int]:
         return 0, 1, 0
     local = int(os.environ.get("LOCAL_RANK", "0"))
     if not dist.is_initialized():
+        global _OWNED
         use_nccl = device_name != "cpu" and torch.cuda.is_available()
         if use_nccl:
             torch.cuda.set_device(local)
         dist.init_process_group(backend="nccl" if use_nccl else "gloo")
+        _OWNED = True
     return dist.get_rank(), dist.get_world_size(), local
+
+
+def teardown(world: int) -> None:
+    """Leave the process group :func:`setup` created: wait for every rank, then destroy it.
+
+    Left to the interpreter's exit, the group's gloo threads could still be running when their objects
+    were destroyed, and a rank died with ``terminate called without an active exception`` (SIGABRT)
+    after the run had finished (``test_ddp_two_processes_gloo`` failed that way now and then).
+    """
+    global _OWNED
+    if world > 1 and _OWNED and dist.is_initialized():
+        dist.barrier()
+        dist.destroy_process_group()
+        _OWNED = False
 
 
 def agree_on_path(path: str | Path, world: int) -> Path:

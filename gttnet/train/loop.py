@@ -317,6 +317,7 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
             if max_steps is not None and done_here >= max_steps:
                 _save(ctx, optimizer, state)
                 bar.close()
+                distributed.teardown(ctx.world)
                 return RunResult(ctx.run_dir, state, ctx.model, finished=False)
             lr = _lr(stage, state, total)
             loss, parts, n_seq = _step(ctx, step_fn, optimizer, trainable, stage, state, lr)
@@ -344,4 +345,5 @@ def _train(recipe: TrainRecipe, payload: dict | None, out, device, max_steps, pr
         _save(ctx, optimizer, state)
     bar.close()
     _finish(ctx, state)
+    distributed.teardown(ctx.world)
     return RunResult(ctx.run_dir, state, ctx.model, finished=True)
