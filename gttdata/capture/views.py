@@ -176,11 +176,10 @@ class Observations:
 
         ``r = R^T K^-1 [u, v, 1]^T`` normalised, with R the world→camera rotation.
         """
+        # world-from-pixel map R^T K^-1 of every image, shape (N, 3, 3), applied as one batched matmul
+        M = self.cam_from_world[:, :3, :3].transpose(0, 2, 1) @ np.linalg.inv(self.K)
         px = np.where(self.visible[..., None], self.keypoints_px, 0.0).astype(np.float64)
-        h = np.concatenate([px, np.ones(px.shape[:-1] + (1,))], axis=-1)
-        Kinv = np.linalg.inv(self.K)
-        d = np.einsum("nab,njb->nja", Kinv, h)
-        d = np.einsum("nba,njb->nja", self.cam_from_world[:, :3, :3], d)
+        d = px @ M[:, :, :2].transpose(0, 2, 1) + M[:, None, :, 2]
         d /= np.linalg.norm(d, axis=-1, keepdims=True)
         return np.where(self.visible[..., None], d, 0.0)
 
