@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from gttnet.errors import GttNetError
-from gttnet.geometry.triangulation import fill_from_donors, project_lone
+from gttnet.geometry.triangulation import _PARALLEL_EPS, _PARALLEL_EPS_32, fill_from_donors, project_lone
 
 __all__ = [
     "DENSE_MAX_IMAGES",
@@ -43,9 +43,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-#: Rays whose squared sine of the angle between them is below this are treated as parallel (as dense).
-_PARALLEL_EPS = 1e-12
 
 #: Under ``none`` sequencing, ``candidates="auto"`` searches all pairs up to this many images and uses the
 #: k-d tree above it (measured at 1,440 images: same GTT-Net accuracy, ~10x less pseudo-triangulation time).
@@ -242,7 +239,7 @@ def pair_costs(
     conv = np.empty(p)
     valid = np.empty((p, j), dtype=bool)
     depth = np.empty((p, j))
-    eps = dtype(_PARALLEL_EPS) if np.dtype(dtype) == np.float64 else dtype(1e-7)
+    eps = dtype(_PARALLEL_EPS) if np.dtype(dtype) == np.float64 else dtype(_PARALLEL_EPS_32)
     for q0 in range(0, p, _PAIR_CHUNK):
         i, k = rows[q0 : q0 + _PAIR_CHUNK], cols[q0 : q0 + _PAIR_CHUNK]
         ri, rk = R[:, i], R[:, k]  # (3, P, J)

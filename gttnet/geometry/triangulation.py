@@ -16,6 +16,8 @@ log = logging.getLogger(__name__)
 
 #: Rays whose squared sine of the angle between them is below this are treated as parallel.
 _PARALLEL_EPS = 1e-12
+#: The same in float32, whose ``1 - b^2`` cannot resolve smaller values (about 0.02 degrees).
+_PARALLEL_EPS_32 = 1e-7
 
 
 @dataclass(frozen=True)
@@ -104,8 +106,9 @@ def _pair_block(
     gap += ri @ mT[:, cols].transpose(0, 2, 1)  # Pluecker product m_i . r_j + r_i . m_j
     sin2 = np.multiply(b, b)
     np.subtract(1.0, sin2, out=sin2)
-    ok = sin2 > _PARALLEL_EPS
-    np.maximum(sin2, _PARALLEL_EPS, out=sin2)
+    eps = _PARALLEL_EPS if sin2.dtype == np.float64 else _PARALLEL_EPS_32
+    ok = sin2 > eps
+    np.maximum(sin2, eps, out=sin2)
     s = b * e
     s -= d  # s * sin2
     t = b * d
@@ -305,9 +308,14 @@ def pseudo_triangulate(
     # row block, so same-camera pairs and the mirrored half are never computed.
     perm = np.argsort(cam, kind="stable")
     Cp, cp = C[perm], cam[perm]
-    rT = np.ascontiguousarray(r[perm].transpose(1, 0, 2))  # (J, N, 3)
-    mT = np.cross(Cp[None], rT)
-    rC = np.einsum("jnk,nk->jn", rT, Cp)
+    r64 = np.ascontiguousarray(r[perm].transpose(1, 0, 2))  # (J, N, 3)
+    # The pair costs only rank neighbours and test validity, so they run in float32 (about 1.6x faster
+    # at N = 300); the Pluecker moments m = C x r and r.C are formed in float64 first. X_init is
+    # triangulated in float64 from the chosen pairs.
+    rT = r64.astype(np.float32)
+    mT = np.cross(Cp[None], r64).astype(np.float32)
+    rC = np.einsum("jnk,nk->jn", r64, Cp).astype(np.float32)
+    Cp32 = Cp.astype(np.float32)
     cost = np.full((n, n), np.inf)
     conv = np.full((n, n), np.nan)
     valid = np.zeros((n, n, j), dtype=bool)
@@ -315,8 +323,8 @@ def pseudo_triangulate(
     for g0, g1 in zip(np.r_[0, ends[:-1]], ends, strict=True):
         for start in range(g0, g1 if g1 < n else g0, block_rows):
             rows, cols = slice(start, min(start + block_rows, g1)), slice(g1, n)
-            ok, err, b = _pair_block(rows, cols, rT, mT, rC, Cp)
-            cnt = ok.sum(0)
+            ok, err, b = _pair_block(rows, cols, rT, mT, rC, Cp32)
+            cnt = ok.sum(0, dtype=np.float32)  # float32 means: the costs stay float32 values (_rank_rows)
             err[~ok] = 0.0
             b[~ok] = 0.0
             with np.errstate(invalid="ignore", divide="ignore"):
@@ -334,12 +342,32 @@ def pseudo_triangulate(
     if min_angle_deg > 0:
         demoted = np.abs(np.nan_to_num(conv, nan=0.0)) > np.cos(np.deg2rad(min_angle_deg))
     finite = np.isfinite(cost)
-    order = np.lexsort((cost, ~finite), axis=-1).astype(np.int64)
-    init_order = (
-        np.lexsort((cost, demoted, ~finite), axis=-1).astype(np.int64) if min_angle_deg > 0 else order
-    )
+    order = _rank_rows(cost)
+    init_order = _rank_rows(cost, tier=np.where(finite, demoted, 2)) if min_angle_deg > 0 else order
     X, source = _initial_structure(C, r, vis, valid, init_order, finite)
     return PseudoTriangulation(cost=cost, convergence=conv, valid=valid, order=order, X_init=X, source=source)
+
+
+def _rank_rows(cost: np.ndarray, tier: np.ndarray | None = None) -> np.ndarray:
+    """Stable argsort of each row by ``(tier, cost)``, shape ``(N, N)`` int64.
+
+    The costs (non-negative or +inf, float32 values: the pair costs are computed in float32) are turned
+    into unique int64 keys: the float32 bit pattern, which orders non-negative floats, with the tier
+    above it and the column index below it. Unique keys make numpy's default (SIMD) sort give the stable
+    order exactly, about 3x faster than a stable sort of the floats at N = 300.
+
+    Args:
+        cost: Pair costs, shape ``(N, N)``, each >= 0 or +inf and exactly representable in float32.
+        tier: Optional primary key per entry, shape ``(N, N)``, integers 0..2.
+    """
+    n = cost.shape[1]
+    # + 0.0 turns a -0.0, whose sign bit would sort it first, into +0.0
+    key = (np.asarray(cost, dtype=np.float32) + np.float32(0.0)).view(np.int32).astype(np.int64)
+    if tier is not None:
+        key += np.asarray(tier, dtype=np.int64) << 31
+    key *= n
+    key += np.arange(n)
+    return np.argsort(key, axis=-1).astype(np.int64, copy=False)
 
 
 def _initial_structure(

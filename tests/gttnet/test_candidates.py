@@ -45,8 +45,9 @@ def test_pair_costs_match_the_dense_costs(scene_factory):
     cost, conv, valid, _ = pair_costs(C, r, i, j)
     np.testing.assert_array_equal(np.isinf(cost), np.isinf(pt.cost[i, j]))
     fin = np.isfinite(cost)
-    np.testing.assert_allclose(cost[fin], pt.cost[i, j][fin], rtol=1e-9, atol=1e-15)
-    np.testing.assert_allclose(conv[fin], pt.convergence[i, j][fin], rtol=1e-9)
+    # the dense path ranks pairs by float32 costs: float32 rounding, no more
+    np.testing.assert_allclose(cost[fin], pt.cost[i, j][fin], rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(conv[fin], pt.convergence[i, j][fin], rtol=1e-5)
     np.testing.assert_array_equal(valid, pt.valid[i, j])
     cost32, *_ = pair_costs(C, r, i, j, dtype=np.float32)
     assert np.nanmax(np.abs(cost32[fin] - cost[fin]) / cost[fin].mean()) < 1e-3
@@ -71,9 +72,9 @@ def test_candidates_come_from_other_cameras_and_find_the_dense_neighbours(scene_
     gap_dense = np.median(np.abs(gt.timestamp_s[dense] - gt.timestamp_s[:, None]))
     assert gap < 1.5 * gap_dense
     assert np.median(np.linalg.norm(cp.X_init - gt.points3d, axis=-1)) < 0.02
-    # Each slot's cost is the dense cost of that pair, sorted ascending per row.
+    # Each slot's cost is the dense cost of that pair (which ranks in float32), sorted ascending per row.
     ok = cp.partners >= 0
-    np.testing.assert_allclose(cp.cost[ok], pt.cost[np.nonzero(ok)[0], cp.partners[ok]])
+    np.testing.assert_allclose(cp.cost[ok], pt.cost[np.nonzero(ok)[0], cp.partners[ok]], rtol=1e-4)
     ranked = np.where(np.isfinite(cp.cost), cp.cost, 1e300)
     assert np.all(np.diff(ranked, axis=1) >= 0)
 
