@@ -194,8 +194,9 @@ class GTTNetReconstructor:
         Returns:
             :class:`Reconstruction` with points3d (N, J, 3) in world metres, the solver's affinity and the
             recovered order: the timestamp order under ``full``, never contradicting a stream under
-            ``partial``, under ``none`` the spectral order of a nearest-neighbour graph over the
-            reconstructed poses (:func:`gttnet.geometry.ordering.pose_graph_affinity`).
+            ``partial``, under ``none`` the spectral order of a nearest-neighbour graph over poses
+            (:func:`gttnet.model.inputs.pose_order`): the pseudo-triangulated ones the streams were
+            ordered by, else the reconstructed ones.
             ``info["stream_order"]`` says whether the streams were ordered first.
         """
         if not isinstance(obs, Observations):
@@ -211,9 +212,11 @@ class GTTNetReconstructor:
             and self.stream_order
             and not use_candidate_search("none", obs.n_images, self.candidates)
         )
-        streams_view = obs
+        streams_view, pose_rank = obs, None
         if streams:
-            streams_view, seq = stream_ordered_view_and_inputs(obs, k=cfg.k, order_k=STREAM_ORDER_K)
+            streams_view, seq, pose_rank = stream_ordered_view_and_inputs(
+                obs, k=cfg.k, order_k=STREAM_ORDER_K
+            )
         else:
             seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates)
         noise_px = None
@@ -223,7 +226,13 @@ class GTTNetReconstructor:
         out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=ray_weight, decode=False)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         x_est = out.x_est.double().cpu().numpy()
-        if obs.sequencing == "none":
+        if pose_rank is not None:
+            # The global order the streams were cut from (the pseudo-triangulated poses' pose graph), not
+            # a second one over the network's poses: on the validation splits (16 captures each, bundled
+            # models) mean Kendall tau paper 0.783 against 0.666, CMU 0.733 against 0.733, default 0.614
+            # against 0.616, and 8 ms less at 300 images.
+            order = pose_rank
+        elif obs.sequencing == "none":
             # Ordered by the poses the network reconstructed, not by its affinity: on the paper protocol's
             # validation split (16 sequences, bundled model) Kendall tau 0.70 against 0.63 for the spectral
             # order of the learned neighbourhood affinity (k = 8: 0.65, k = 4: 0.39; k chosen there).

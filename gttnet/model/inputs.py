@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 __all__ = [
     "SequenceInput",
     "order_streams",
+    "pose_order",
     "prepare_inputs",
     "prepare_stream_ordered_inputs",
     "random_rotation",
@@ -209,15 +210,38 @@ def order_streams(obs: Observations, x_init: np.ndarray, *, k: int) -> Observati
     Raises:
         ValueError: If ``obs`` is not order-free or ``x_init`` does not match it.
     """
-    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order, stream_ranks
+    return _streams_view(obs, x_init, k=k)[0]
+
+
+def pose_order(x: np.ndarray, *, k: int) -> np.ndarray:
+    """The global image order the poses suggest: the spectral order of their k-nearest-neighbour graph.
+
+    Args:
+        x: Poses, shape ``(N, J, 3)``, any unit; NaN joints count as 0.
+        k: Links per image of the pose graph (:func:`~gttnet.geometry.ordering.pose_graph_affinity`).
+
+    Returns:
+        Rank of each image, a permutation of ``0..N-1``, shape ``(N,)``.
+    """
+    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order
+
+    return spectral_order(
+        pose_graph_affinity(np.nan_to_num(np.asarray(x, dtype=np.float64)), k=k, sparse=True)
+    )
+
+
+def _streams_view(obs: Observations, x_init: np.ndarray, *, k: int) -> tuple[Observations, np.ndarray]:
+    """:func:`order_streams`, also returning the global rank, shape ``(N,)``, that the streams come from."""
+    from gttnet.geometry.ordering import stream_ranks
 
     if obs.sequencing != "none":
         raise ValueError(f"order_streams: expects an order-free capture, got sequencing {obs.sequencing!r}")
-    X = np.nan_to_num(np.asarray(x_init, dtype=np.float64))
-    if X.shape[0] != obs.n_images:
-        raise ValueError(f"order_streams: x_init holds {X.shape[0]} images, the capture {obs.n_images}")
-    rank = spectral_order(pose_graph_affinity(X, k=k, sparse=True))
-    return replace(obs, sequencing="partial", stream_index=stream_ranks(rank, obs.cam_id))
+    if np.shape(x_init)[0] != obs.n_images:
+        raise ValueError(
+            f"order_streams: x_init holds {np.shape(x_init)[0]} images, the capture {obs.n_images}"
+        )
+    rank = pose_order(x_init, k=k)
+    return replace(obs, sequencing="partial", stream_index=stream_ranks(rank, obs.cam_id)), rank
 
 
 def prepare_stream_ordered_inputs(
@@ -245,14 +269,19 @@ def prepare_stream_ordered_inputs(
 
 def stream_ordered_view_and_inputs(
     obs: Observations, *, k: int, order_k: int, dtype: torch.dtype = torch.float32
-) -> tuple[Observations, SequenceInput]:
-    """:func:`prepare_stream_ordered_inputs` that also returns the ``partial`` view with the estimated streams."""
+) -> tuple[Observations, SequenceInput, np.ndarray]:
+    """:func:`prepare_stream_ordered_inputs`, also returning the view and the global rank.
+
+    Returns ``(view, inputs, rank)``: the ``partial`` view with the estimated streams, the network inputs,
+    and the global rank of every image the streams were cut from (:func:`pose_order` of the
+    pseudo-triangulated poses), shape ``(N,)``.
+    """
     from gttnet.geometry.neighbours import pose_weighted_chain
     from gttnet.geometry.triangulation import pseudo_triangulate
 
     pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
-    view = order_streams(obs, pt.X_init, k=order_k)
+    view, rank = _streams_view(obs, pt.X_init, k=order_k)
     seq = prepare_inputs(view, k=k, dtype=dtype, pseudo=pt)
     assert seq.chain is not None  # a partial view always has its chain
     chain = pose_weighted_chain(seq.chain.numpy(), pt.X_init)
-    return view, replace(seq, chain=torch.as_tensor(chain, dtype=dtype))
+    return view, replace(seq, chain=torch.as_tensor(chain, dtype=dtype)), rank
