@@ -159,15 +159,19 @@ def run_runtime(spec: RuntimeSpec, out_dir: str | Path, *, progress: bool = Fals
         samples, rate = _samples_of_length(spec, length, rate)
         views = [make_view(sample, spec.sequencing)[0] for sample in samples]
         res.n_images.append(int(np.median([obs.n_images for obs in views])))
-        for m, fn in runners.items():
-            if length == spec.lengths[0]:
+        if length == spec.lengths[0]:
+            for fn in runners.values():
                 fn(views[0])  # warm-up: imports, caches, first-call allocation
-            runs = []
-            for obs in views:
-                for _ in range(spec.repeats):
+        # The methods take turns on each capture, so a slow spell of a shared machine hits all of them
+        # alike instead of one method's whole block.
+        times: dict[str, list[float]] = {m: [] for m in runners}
+        for obs in views:
+            for _ in range(spec.repeats):
+                for m, fn in runners.items():
                     t0 = time.perf_counter()
                     fn(obs)
-                    runs.append(time.perf_counter() - t0)
+                    times[m].append(time.perf_counter() - t0)
+        for m, runs in times.items():
             med = float(np.median(runs))
             res.seconds[m].append(med)
             res.spread[m].append((float(min(runs)), float(max(runs))))
