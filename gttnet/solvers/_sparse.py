@@ -50,43 +50,90 @@ def _assemble(
     """Block-diagonal matrix of the J systems of one batch item; returns it and the unknown index (J, N, 3).
 
     Entry (a, b) for unknowns at images n, m is ``M[n, m] v_a . v_b`` plus, when n = m, ``v_a^T W_n v_b``.
-    Slot 0 of every image is always an unknown, so the slot-0 pairs are one vectorised dot product; the
-    full 3 x 3 slot blocks are formed only for the image pairs where either side has extra slots.
     Within each joint the unknowns are numbered by image in ``order`` (default: image index), then slot.
+    Joints whose every image has one unknown (slot 0: observed everywhere, pinned rays) come first: their
+    blocks share M's pattern and are written straight in canonical CSC form, with no sort. The other
+    joints (extra slots where unobserved, or a finite ray weight) follow, assembled from triplets.
     """
     j, n, _ = act.shape
+    order = np.arange(n) if order is None else np.asarray(order)
+    act_o, V_o = act[:, order], V[:, order]  # images in elimination order
+    W_o = None if W is None else W[:, order]
+    plain = ~act_o[:, :, 1:].any(axis=(1, 2))
+    # number the unknowns: plain joints first, then the mixed ones; within a joint by image, then slot
+    joint_order = np.r_[np.flatnonzero(plain), np.flatnonzero(~plain)]
+    slots = np.full((j, n, 3), -1, dtype=np.int64)
+    ranked = act_o[joint_order]
+    numbered = np.full(ranked.shape, -1, dtype=np.int64)
+    numbered[ranked] = np.arange(int(ranked.sum()))
+    slots[joint_order] = numbered
     pos = np.full((j, n, 3), -1, dtype=np.int64)
-    if order is None:
-        pos[act] = np.arange(int(act.sum()))
-    else:
-        ranked = act[:, order]  # (J, N, 3) with the images in elimination order
-        slots = np.full((j, n, 3), -1, dtype=np.int64)
-        slots[ranked] = np.arange(int(act.sum()))
-        pos[:, order] = slots
-    Mc = M.tocoo()
-    ri, ci, vals = Mc.row, Mc.col, Mc.data
-    V0 = V[:, :, 0]
-    data: list[np.ndarray] = [np.einsum("jkd,jkd->jk", V0[:, ri], V0[:, ci]).ravel() * np.tile(vals, j)]
-    rows: list[np.ndarray] = [pos[:, ri, 0].ravel()]
-    cols: list[np.ndarray] = [pos[:, ci, 0].ravel()]
-    extra = np.asarray(act[:, :, 1:].any(-1))
-    jj, kk = np.nonzero(extra[:, ri] | extra[:, ci])
-    if jj.size:
-        blk = V[jj, ri[kk]] @ V[jj, ci[kk]].transpose(0, 2, 1)
-        blk *= vals[kk][:, None, None]
-        blk[:, 0, 0] = 0.0  # slot-0 pairs are already counted above
-        data.append(blk.ravel())
-        rows.append(np.broadcast_to(pos[jj, ri[kk]][:, :, None], blk.shape).ravel())
-        cols.append(np.broadcast_to(pos[jj, ci[kk]][:, None, :], blk.shape).ravel())
-    if W is not None:
-        D = V @ W @ V.transpose(0, 1, 3, 2)
-        data.append(D.ravel())
-        rows.append(np.broadcast_to(pos[..., :, None], D.shape).ravel())
-        cols.append(np.broadcast_to(pos[..., None, :], D.shape).ravel())
-    d, r, c = np.concatenate(data), np.concatenate(rows), np.concatenate(cols)
-    keep = (r >= 0) & (c >= 0)
+    pos[:, order] = slots
+    Mo = M[order][:, order].tocoo()
+    diag = np.arange(n)
+    # M's pattern with its diagonal (an image without links still carries its ray-weight terms there)
+    P = sp.csc_matrix((np.r_[Mo.data, np.zeros(n)], (np.r_[Mo.row, diag], np.r_[Mo.col, diag])), shape=(n, n))
+    P.sum_duplicates()
+    ri, vals, ptr = P.indices, P.data, P.indptr
+    ci = np.repeat(diag, np.diff(ptr))
+    blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (data, indices, indptr) per part
+    jp = np.flatnonzero(plain)
+    if jp.size:
+        V0 = np.ascontiguousarray(V_o[jp, :, 0].transpose(2, 0, 1))  # (3, Jp, N)
+        data = (
+            V0[0][:, ri] * V0[0][:, ci] + V0[1][:, ri] * V0[1][:, ci] + V0[2][:, ri] * V0[2][:, ci]
+        ) * vals
+        if W_o is not None:
+            at = np.flatnonzero(ri == ci)  # the diagonal entry of every column, in column order
+            v0 = V_o[jp, :, 0]
+            data[:, at] += np.einsum("jna,jnab,jnb->jn", v0, W_o[jp], v0)
+        # joint b's block: M's pattern shifted by b * N unknowns and b * nnz entries
+        shift = np.arange(jp.size)[:, None]
+        indptr = np.r_[(ptr[:-1][None, :] + shift * ri.size).ravel(), jp.size * ri.size]
+        blocks.append((data.ravel(), (ri[None, :] + shift * n).ravel(), indptr))
+    jm = np.flatnonzero(~plain)
+    if jm.size:
+        base = int(act_o[jp].sum())
+        local = slots[jm] - base  # the mixed joints' unknowns, from 0, in elimination order of images
+        Vm, am = V_o[jm], act_o[jm]
+        data_l: list[np.ndarray] = [
+            np.einsum("jkd,jkd->jk", Vm[:, ri, 0], Vm[:, ci, 0]).ravel() * np.tile(vals, jm.size)
+        ]
+        rows_l: list[np.ndarray] = [local[:, ri, 0].ravel()]
+        cols_l: list[np.ndarray] = [local[:, ci, 0].ravel()]
+        extra = np.asarray(am[:, :, 1:].any(-1))
+        jj, kk = np.nonzero(extra[:, ri] | extra[:, ci])
+        if jj.size:
+            blk = Vm[jj, ri[kk]] @ Vm[jj, ci[kk]].transpose(0, 2, 1)
+            blk *= vals[kk][:, None, None]
+            blk[:, 0, 0] = 0.0  # slot-0 pairs are already counted above
+            data_l.append(blk.ravel())
+            rows_l.append(np.broadcast_to(local[jj, ri[kk]][:, :, None], blk.shape).ravel())
+            cols_l.append(np.broadcast_to(local[jj, ci[kk]][:, None, :], blk.shape).ravel())
+        if W_o is not None:
+            D = Vm @ W_o[jm] @ Vm.transpose(0, 1, 3, 2)
+            data_l.append(D.ravel())
+            rows_l.append(np.broadcast_to(local[..., :, None], D.shape).ravel())
+            cols_l.append(np.broadcast_to(local[..., None, :], D.shape).ravel())
+        d, r, c = np.concatenate(data_l), np.concatenate(rows_l), np.concatenate(cols_l)
+        keep = (r >= 0) & (c >= 0)
+        size_m = int(am.sum())
+        Hm = sp.csc_matrix((d[keep], (r[keep], c[keep])), shape=(size_m, size_m))
+        Hm.sum_duplicates()
+        blocks.append((Hm.data, Hm.indices + base, Hm.indptr))
+    # stitch the parts: block-diagonal, so each part's CSC arrays shift by the unknowns and entries before it
     size = int(act.sum())
-    return sp.csc_matrix((d[keep], (r[keep], c[keep])), shape=(size, size)), pos
+    data_all, idx_all, ptr_all = [], [], [np.zeros(1, dtype=np.int64)]
+    nnz = 0
+    for d_, i_, p_ in blocks:
+        data_all.append(d_)
+        idx_all.append(i_)
+        ptr_all.append(p_[1:] + nnz)
+        nnz += d_.size
+    H = sp.csc_matrix(
+        (np.concatenate(data_all), np.concatenate(idx_all), np.concatenate(ptr_all)), shape=(size, size)
+    )
+    return H, pos
 
 
 class _SparseSolve(torch.autograd.Function):

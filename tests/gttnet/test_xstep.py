@@ -301,3 +301,42 @@ def test_dense_factor_reports_a_singular_system_as_singular_structure():
     with pytest.warns(RuntimeWarning, match="not numerically positive definite"):
         with pytest.raises(SingularStructureError, match="1 of 2 joint systems"):
             _factor(H)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_sparse_assembly_matches_the_entrywise_definition(seed):
+    # Joints observed everywhere (one unknown per image) and joints with extra slots, with and without
+    # ray-weight blocks W, in a fill-reducing image order: every active slot pair (a at image n, b at m)
+    # holds M[n, m] v_a . v_b, plus v_a^T W_n v_b when n = m, in canonical CSC form.
+    import scipy.sparse as sp
+
+    from gttnet.solvers._sparse import _assemble, _image_order
+
+    rng = np.random.default_rng(seed)
+    n, j = 25, 4
+    A = (rng.random((n, n)) < 0.2) * rng.random((n, n))
+    np.fill_diagonal(A, 0.0)
+    A[0] = A[:, 0] = 0.0  # an image without links
+    As = sp.csr_matrix(A)
+    L = sp.diags(np.asarray(As.sum(1)).ravel()) - As
+    M = (L.T @ L).tocsr()
+    act = np.zeros((j, n, 3), bool)
+    act[..., 0] = True
+    act[2:, rng.random(n) < 0.3, 1:] = True  # joints 0, 1 plain; 2, 3 with extra slots
+    V = rng.normal(size=(j, n, 3, 3)) * act[..., None]
+    W = None if seed % 2 else rng.normal(size=(j, n, 3, 3))
+    H, pos = _assemble(M, V, act, W, order=_image_order(M))
+    assert H.has_canonical_format
+    assert sorted(pos[act].tolist()) == list(range(int(act.sum())))
+    Hd, Md = H.toarray(), M.toarray()
+    for jj, nn, a in np.argwhere(act):
+        for mm, b in np.argwhere(act[jj]):
+            want = Md[nn, mm] * V[jj, nn, a] @ V[jj, mm, b]
+            if W is not None and nn == mm:
+                want += V[jj, nn, a] @ W[jj, nn] @ V[jj, nn, b]
+            assert Hd[pos[jj, nn, a], pos[jj, mm, b]] == pytest.approx(want, abs=1e-12)
+    # no entries couple different joints
+    owner = np.empty(int(act.sum()), dtype=int)
+    owner[pos[act]] = np.argwhere(act)[:, 0]
+    r, c = H.nonzero()
+    assert np.all(owner[r] == owner[c])
