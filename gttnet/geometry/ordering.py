@@ -68,7 +68,11 @@ def graph_components(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndar
         >>> graph_components(A).tolist()
         [0, 0, 1, 1]
     """
-    S = _symmetric_affinity(A)
+    return _components(_symmetric_affinity(A), tol)
+
+
+def _components(S: np.ndarray | csr_matrix, tol: float) -> np.ndarray:
+    """:func:`graph_components` of an already symmetrised affinity ``S``."""
     _, raw = connected_components(csr_matrix(S > tol), directed=False)  # sparse S: S > tol stays sparse
     labels = np.unique(raw)
     sizes = np.array([np.count_nonzero(raw == c) for c in labels])
@@ -168,7 +172,7 @@ def spectral_order(A: np.ndarray | csr_matrix, *, tol: float = 0.0) -> np.ndarra
     S = _symmetric_affinity(A)
     n = S.shape[0]
     deg_max = float(np.max(S.sum(axis=1))) if n else 0.0
-    labels = graph_components(S, tol=max(tol, NEGLIGIBLE_LINK * deg_max))
+    labels = _components(S, max(tol, NEGLIGIBLE_LINK * deg_max))
     sequence: list[np.ndarray] = []
     for c in range(int(labels.max()) + 1 if n else 0):
         idx = np.flatnonzero(labels == c)
