@@ -251,7 +251,9 @@ def reconstruct_auto(
         frame_times_s: Per-image times on each camera's clock, passed to ``sync``.
 
     Returns:
-        The chosen method's reconstruction; ``info["method_ran"]`` names it.
+        The chosen method's reconstruction; ``info["method_ran"]`` names it. Under ``partial``, where the
+        clocks cannot be recovered, :func:`order_free_fallback`'s method runs instead, with the reason in
+        ``info["sync_failed"]``.
     """
     from gttnet.methods import reconstruct
 
@@ -260,7 +262,17 @@ def reconstruct_auto(
         options = {**options, "fps": fps, "frame_times_s": frame_times_s}
     elif name == "stream-sync":
         options = {**options, "fps": fps, "fallback": order_free_fallback(obs)}
-    rec = reconstruct(obs, name, **options)
+    try:
+        rec = reconstruct(obs, name, **options)
+    except GttNetError as exc:
+        if name != "sync":
+            raise
+        # Clocks that cannot be recovered (e.g. a camera with fewer than three images): the order-free
+        # method still uses each camera's frame order (neighbourhoods and chain), as stream-sync's does.
+        name = order_free_fallback(obs)
+        log.warning("auto: clock recovery failed (%s); %s reconstructs the capture instead", exc, name)
+        rec = reconstruct(obs, name)
+        rec = replace(rec, info={**rec.info, "sync_failed": str(exc)})
     return Reconstruction(
         points3d=rec.points3d,
         affinity=rec.affinity,

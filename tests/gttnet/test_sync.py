@@ -403,3 +403,17 @@ def test_stream_sync_falls_back_when_a_camera_has_too_few_images_for_clocks(capt
     assert rec.info["method_ran"] == "dloe" and rec.info["clock_rms_px"] is None
     with pytest.raises(GttNetError, match="camera 2 has 2 image"):
         reconstruct(few, "stream-sync", fallback=None)
+
+
+def test_auto_with_camera_order_falls_back_when_clocks_cannot_be_recovered(capture):
+    """Partial input where a camera has two images: sync cannot recover its clock; auto still answers."""
+    from gttnet.methods import reconstruct
+
+    obs, _ = make_view(capture, "partial", seed=1)
+    keep = np.flatnonzero(obs.cam_id != 2)
+    few = obs.take(np.r_[keep, np.flatnonzero(obs.cam_id == 2)[:2]])
+    with pytest.raises(GttNetError, match="camera 2 has 2 image"):
+        reconstruct(few, "sync")
+    rec = reconstruct(few, "auto")
+    assert rec.info["method_ran"] == "dloe" and "camera 2 has 2 image" in rec.info["sync_failed"]
+    np.testing.assert_allclose(rec.points3d, reconstruct(few, "dloe").points3d)
