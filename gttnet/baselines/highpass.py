@@ -69,36 +69,53 @@ def difference_operator(n: int, order: int = 2, *, timestamp_s: np.ndarray | Non
     return sp.csr_matrix(G)
 
 
-def _banded_systems(
-    P: np.ndarray, lam: float, order: int, timestamp_s: np.ndarray | None = None
-) -> np.ndarray:
-    """Upper banded storage of every joint's normal matrix ``blockdiag(P_n) + lam G^T G (x) I3``.
+class _HighpassSystem:
+    """Every joint's normal equations for one set of rays, solved for any prior weight.
 
-    Unknowns are ordered ``3 n + a`` (image-major), so the matrix has ``3 * order`` super-diagonals.
+    The normal matrix is ``blockdiag(P_n) + lam G^T G (x) I3`` per joint: only ``lam`` changes across a
+    cross-validation grid, so the ray part, the filter part, the right-hand side and the check of which
+    joints are pinned down are built once and each weight costs one scaled sum and the banded solves.
+    Unknowns are ordered ``3 n + a`` (image-major), so the matrix has ``3 * order`` super-diagonals, in
+    the upper banded storage of ``scipy.linalg.solveh_banded``.
 
     Args:
+        centers: Camera centres in time order, metres, shape ``(N, 3)``.
         P: Ray projectors, shape ``(N, J, 3, 3)``.
-        lam: Prior weight.
         order: Difference order.
         timestamp_s: Sorted sample times for divided differences (None: even spacing).
-
-    Returns:
-        ``ab`` of shape ``(J, 3 order + 1, 3N)`` for ``scipy.linalg.solveh_banded`` (``lower=False``).
     """
-    n, J = P.shape[:2]
-    u = max(3 * order, 2)
-    ab = np.zeros((J, u + 1, 3 * n))
-    G = difference_operator(n, order, timestamp_s=timestamp_s)
-    GtG = (G.T @ G).tocsr()
-    for d in range(order + 1):
-        diag = np.zeros(n)
-        diag[: n - d] = GtG.diagonal(d)
-        # Entry (3n + a, 3(n + d) + a) lives in row u - 3d, column 3(n + d) + a.
-        ab[:, u - 3 * d, 3 * d :] += lam * np.repeat(diag[: n - d], 3)[None, :]
-    for a in range(3):
-        for b in range(a, 3):
-            ab[:, u - (b - a), np.arange(n) * 3 + b] += P[:, :, a, b].T
-    return ab
+
+    def __init__(
+        self, centers: np.ndarray, P: np.ndarray, order: int, timestamp_s: np.ndarray | None
+    ) -> None:
+        n, J = P.shape[:2]
+        u = max(3 * order, 2)
+        self.n, self.joints = n, J
+        self.rays_ab = np.zeros((J, u + 1, 3 * n))  # blockdiag(P_n), shape (J, u + 1, 3N)
+        for a in range(3):
+            for b in range(a, 3):
+                self.rays_ab[:, u - (b - a), np.arange(n) * 3 + b] = P[:, :, a, b].T
+        G = difference_operator(n, order, timestamp_s=timestamp_s)
+        GtG = (G.T @ G).tocsr()
+        self.prior_ab = np.zeros((u + 1, 3 * n))  # G^T G (x) I3, shared by every joint
+        for d in range(order + 1):
+            # Entry (3n + a, 3(n + d) + a) lives in row u - 3d, column 3(n + d) + a.
+            self.prior_ab[u - 3 * d, 3 * d :] = np.repeat(GtG.diagonal(d)[: n - d], 3)
+        self.rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
+        self.pinned = np.flatnonzero(_pinned_by_rays(P, order, timestamp_s))
+
+    def solve(self, lam: float) -> np.ndarray:
+        """Trajectories for prior weight ``lam``, shape ``(N, J, 3)``; NaN for joints not pinned down."""
+        X = np.full((self.n, self.joints, 3), np.nan)
+        lam_prior = lam * self.prior_ab
+        for j in self.pinned:
+            try:
+                X[:, j] = solveh_banded(self.rays_ab[j] + lam_prior, self.rhs[j], check_finite=False).reshape(
+                    self.n, 3
+                )
+            except LinAlgError:
+                log.debug("hpf: joint %d is undetermined", j)
+        return X
 
 
 def fit_highpass(
@@ -129,18 +146,7 @@ def fit_highpass(
         pin its trajectory down (too few of them for the prior's null space, e.g. seen in one or two
         images or never) is NaN: its system is singular and any value would be made up.
     """
-    n, J = visible.shape
-    P = ray_projectors(rays, visible, weight)
-    ab = _banded_systems(P, lam, order, timestamp_s)
-    rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
-    X = np.full((n, J, 3), np.nan)
-    pinned = _pinned_by_rays(P, order, timestamp_s)
-    for j in np.flatnonzero(pinned):
-        try:
-            X[:, j] = solveh_banded(ab[j], rhs[j]).reshape(n, 3)
-        except LinAlgError:
-            log.debug("hpf: joint %d is undetermined (%d rays)", j, int(visible[:, j].sum()))
-    return X
+    return _HighpassSystem(centers, ray_projectors(rays, visible, weight), order, timestamp_s).solve(lam)
 
 
 def _pinned_by_rays(P: np.ndarray, order: int, timestamp_s: np.ndarray | None) -> np.ndarray:
@@ -179,20 +185,18 @@ def _cross_validate(
     """
     n = visible.shape[0]
     folds = image_folds(n, n_folds)
-    train = []
+    systems = []  # one per fold, its held-out images' rays dropped; reused for every weight
     for held in folds:
         train_vis = visible.copy()
         train_vis[held] = False
-        train.append(train_vis)
+        systems.append(_HighpassSystem(centers, ray_projectors(rays, train_vis, weight), order, timestamp_s))
     count = max(sum(int(visible[held].sum()) for held in folds), 1)
     cv: dict[float, float] = {}
 
     def score(lam: float) -> None:
         total = 0.0
-        for held, train_vis in zip(folds, train, strict=True):
-            X = fit_highpass(
-                centers, rays, train_vis, lam=lam, order=order, timestamp_s=timestamp_s, weight=weight
-            )
+        for held, system in zip(folds, systems, strict=True):
+            X = system.solve(lam)
             total += float(np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held])))
         cv[lam] = total / count
 
