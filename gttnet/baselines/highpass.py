@@ -183,35 +183,33 @@ def _cross_validate(
     ``search="grid"`` scores every weight of :data:`LAMBDAS`; ``"bracket"`` scores every other one, then
     the two neighbours of the best (9 of 13 weights; the score is unimodal in ``log lam`` in practice).
     """
+    if search not in ("grid", "bracket"):
+        raise ValueError(f"hpf: search must be 'grid' or 'bracket', got {search!r}")
     n = visible.shape[0]
     folds = image_folds(n, n_folds)
-    systems = []  # one per fold, its held-out images' rays dropped; reused for every weight
-    for held in folds:
-        train_vis = visible.copy()
-        train_vis[held] = False
-        systems.append(_HighpassSystem(centers, ray_projectors(rays, train_vis, weight), order, timestamp_s))
     count = max(sum(int(visible[held].sum()) for held in folds), 1)
-    cv: dict[float, float] = {}
 
-    def score(lam: float) -> None:
-        total = 0.0
-        for held, system in zip(folds, systems, strict=True):
-            X = system.solve(lam)
-            total += float(np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held])))
-        cv[lam] = total / count
+    def scores(lams: tuple[float, ...]) -> dict[float, float]:
+        # Folds outer, weights inner: each fold's system is built once per call and only one is held at
+        # a time; every weight's total still adds the folds in the same order.
+        totals = dict.fromkeys(lams, 0.0)
+        for held in folds:
+            train_vis = visible.copy()
+            train_vis[held] = False
+            system = _HighpassSystem(centers, ray_projectors(rays, train_vis, weight), order, timestamp_s)
+            for lam in lams:
+                X = system.solve(lam)
+                totals[lam] += float(
+                    np.nansum(ray_residuals(X[held], centers[held], rays[held], visible[held]))
+                )
+        return {lam: total / count for lam, total in totals.items()}
 
     if search == "grid":
-        for lam in LAMBDAS:
-            score(lam)
-    elif search == "bracket":
-        for lam in LAMBDAS[::2]:
-            score(lam)
-        best = LAMBDAS.index(min(cv, key=cv.__getitem__))
-        for i in (best - 1, best + 1):
-            if 0 <= i < len(LAMBDAS) and LAMBDAS[i] not in cv:
-                score(LAMBDAS[i])
+        cv = scores(LAMBDAS)
     else:
-        raise ValueError(f"hpf: search must be 'grid' or 'bracket', got {search!r}")
+        cv = scores(LAMBDAS[::2])
+        best = LAMBDAS.index(min(cv, key=cv.__getitem__))
+        cv.update(scores(tuple(LAMBDAS[i] for i in (best - 1, best + 1) if 0 <= i < len(LAMBDAS))))
     return min(cv, key=cv.__getitem__), dict(sorted(cv.items()))
 
 
