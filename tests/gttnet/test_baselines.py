@@ -130,6 +130,21 @@ def test_hpf_exact_on_linear_motion():
     assert difference_operator(5, 1).toarray().tolist()[0] == [-1, 1, 0, 0, 0]
 
 
+def test_hpf_bracket_search_scores_a_subset_of_the_grid(scene):
+    """The coarse-to-fine search scores 9 of the 13 weights exactly as the full grid does, around its best."""
+    from gttnet.baselines.highpass import LAMBDAS
+
+    obs, _ = make_view(scene, "full")
+    grid = reconstruct(obs, "hpf", n_folds=3).info["cv_ray_error_m"]
+    bracket = reconstruct(obs, "hpf", n_folds=3, search="bracket").info["cv_ray_error_m"]
+    assert len(grid) == len(LAMBDAS) and len(bracket) == 9
+    assert all(grid[k] == v for k, v in bracket.items())
+    best = min(grid, key=grid.__getitem__)
+    assert best in bracket  # the score is unimodal in log(lam) here: the bracket finds the grid's best
+    with pytest.raises(ValueError, match="search must be 'grid' or 'bracket'"):
+        reconstruct(obs, "hpf", search="golden")
+
+
 def test_trajectory_methods_beat_pseudo(scene):
     obs, gt = make_view(scene, "full")
     base = mpjpe_mm(reconstruct(obs, "pseudo").points3d, gt.points3d)
