@@ -4,7 +4,7 @@ The convention is the CLI's (``--resume`` / ``--overwrite``):
 
 - a run directory that already holds a run is refused unless one of the two is given;
 - ``resume`` continues the run from its checkpoint, and only if it was started by the same recipe
-  (a directory without a checkpoint starts afresh);
+  (execution settings such as ``train.threads`` may differ; a directory without a checkpoint starts afresh);
 - ``overwrite`` deletes the earlier run's files first, so two runs' logs never mix.
 """
 
@@ -50,9 +50,18 @@ def _first_difference(a: object, b: object, where: str = "") -> str:
     return f"{where or 'recipe'}: this recipe has {b!r}, the run has {a!r}"
 
 
+#: How a run is executed, not what it learns: a run resumes with other values of these (more threads or
+#: data workers on another machine; the device is a ``--device`` option, not part of the recipe's identity).
+EXECUTION_SETTINGS = (("train", "threads"), ("data", "num_workers"))
+
+
 def _identity(recipe: TrainRecipe) -> dict:
-    """What makes two runs the same run: the whole recipe except where it lives (``output_dir``)."""
-    return {k: v for k, v in recipe_to_dict(recipe).items() if k != "output_dir"}
+    """What makes two runs the same run: the recipe except where it lives and :data:`EXECUTION_SETTINGS`."""
+    out = {k: v for k, v in recipe_to_dict(recipe).items() if k != "output_dir"}
+    for section, key in EXECUTION_SETTINGS:
+        if isinstance(out.get(section), dict):
+            out[section] = {k: v for k, v in out[section].items() if k != key}
+    return out
 
 
 def open_run(

@@ -136,6 +136,19 @@ def test_resume_refuses_a_run_of_another_recipe(tmp_path):
     assert "another recipe" in line and "seed" in line
 
 
+def test_resume_accepts_other_execution_settings():
+    """More threads or data workers on another machine still continue the same run; what it learns may not change."""
+    from gttnet.train.recipe import load_train_recipe
+    from gttnet.train.rundir import _identity
+
+    base = load_train_recipe("recipes/gttnet/tiny.yaml", _OVER)
+    other = load_train_recipe("recipes/gttnet/tiny.yaml", [*_OVER, "train.threads=3", "data.num_workers=2"])
+    assert other.train.threads == 3 and _identity(other) == _identity(base)
+    assert _identity(
+        load_train_recipe("recipes/gttnet/tiny.yaml", [*_OVER, "train.batch_size=3"])
+    ) != _identity(base)
+
+
 @pytest.mark.slow
 def test_resume_continues_and_overwrite_replaces(tmp_path):
     from gttnet.train.loop import train
