@@ -310,12 +310,14 @@ def pseudo_triangulate(
     Cp, cp = C[perm], cam[perm]
     r64 = np.ascontiguousarray(r[perm].transpose(1, 0, 2))  # (J, N, 3)
     # The pair costs only rank neighbours and test validity, so they run in float32 (about 1.6x faster
-    # at N = 300); the Pluecker moments m = C x r and r.C are formed in float64 first. X_init is
-    # triangulated in float64 from the chosen pairs.
+    # at N = 300); the Pluecker moments m = C x r and r.C are formed in float64 first, about the rig's
+    # mean centre (the costs do not depend on the origin, and a rig far from it would cost float32 its
+    # precision). X_init is triangulated in float64 from the chosen pairs.
+    Cc = Cp - Cp.mean(axis=0)
     rT = r64.astype(np.float32)
-    mT = np.cross(Cp[None], r64).astype(np.float32)
-    rC = np.einsum("jnk,nk->jn", r64, Cp).astype(np.float32)
-    Cp32 = Cp.astype(np.float32)
+    mT = np.cross(Cc[None], r64).astype(np.float32)
+    rC = np.einsum("jnk,nk->jn", r64, Cc).astype(np.float32)
+    Cp32 = Cc.astype(np.float32)
     cost = np.full((n, n), np.inf)
     conv = np.full((n, n), np.nan)
     valid = np.zeros((n, n, j), dtype=bool)

@@ -103,6 +103,19 @@ def test_x_init_on_rays_and_close_to_truth(scene_factory):
     assert np.all(np.diff(np.where(np.isfinite(ranked), ranked, 1e300), axis=1) >= 0)
 
 
+def test_a_rig_far_from_the_origin_keeps_its_costs(scene_factory):
+    """The float32 pair costs are formed about the rig's centre: moving the world 100 km leaves them alone."""
+    sample = scene_factory(n_cameras=4, n_joints=8, frames_per_camera=20, sigma_px=1.0, missing=0.2, seed=3)
+    obs, _ = make_view(sample, "none")
+    C, r = obs.centers(), obs.rays()
+    near = pseudo_triangulate(C, r, obs.visible, obs.cam_id)
+    far = pseudo_triangulate(C + np.array([1e5, -2e5, 50.0]), r, obs.visible, obs.cam_id)
+    fin = np.isfinite(near.cost)
+    np.testing.assert_array_equal(np.isfinite(far.cost), fin)
+    np.testing.assert_allclose(far.cost[fin], near.cost[fin], rtol=1e-3, atol=1e-7)
+    np.testing.assert_allclose(far.X_init - np.array([1e5, -2e5, 50.0]), near.X_init, atol=1e-6)
+
+
 def test_demotion_moves_near_parallel_neighbours_back():
     # Image 1 is a near-parallel view (2 degrees from image 0), image 2 a wide-baseline one.
     P = np.array([0.0, 0.0, 2.0])
