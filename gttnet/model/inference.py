@@ -13,14 +13,13 @@ from gttdata.capture.views import Observations
 from gttnet.errors import ModelError
 from gttnet.geometry.candidates import use_candidate_search
 from gttnet.geometry.ordering import (
-    pose_graph_affinity,
     spectral_order,
     stream_consistent_order,
     timestamp_order,
 )
 from gttnet.methods import Reconstruction, register_method
 from gttnet.model.files import MODEL_FORMAT, read_model_file, write_model_file
-from gttnet.model.inputs import SequenceInput, prepare_inputs, stream_ordered_view_and_inputs
+from gttnet.model.inputs import SequenceInput, pose_order, prepare_inputs, stream_ordered_view_and_inputs
 from gttnet.model.network import GTTNet, GTTNetConfig
 
 __all__ = [
@@ -236,7 +235,7 @@ class GTTNetReconstructor:
             # Ordered by the poses the network reconstructed, not by its affinity: on the paper protocol's
             # validation split (16 sequences, bundled model) Kendall tau 0.70 against 0.63 for the spectral
             # order of the learned neighbourhood affinity (k = 8: 0.65, k = 4: 0.39; k chosen there).
-            order = spectral_order(pose_graph_affinity(x_est, k=16, sparse=True))
+            order = pose_order(x_est, k=16)
         else:
             order = _given_order(obs, affinity)
         return Reconstruction(

@@ -189,12 +189,7 @@ def reconstruct_stream_sync(
         why = why or f"the clocks leave {rms} px RMS (> {max_rms_px:g})"
         log.info("stream-sync: %s; %s instead", why, fallback)
         fb = reconstruct(obs, fallback)
-        return Reconstruction(
-            points3d=fb.points3d,
-            affinity=fb.affinity,
-            order=fb.order,
-            info={**fb.info, **checks, "method_ran": fallback},
-        )
+        return replace(fb, info={**fb.info, **checks, "method_ran": fallback})
     assert rec is not None  # without a check, a failed recovery was raised above
     return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
 
@@ -273,9 +268,4 @@ def reconstruct_auto(
         log.warning("auto: clock recovery failed (%s); %s reconstructs the capture instead", exc, name)
         rec = reconstruct(obs, name)
         rec = replace(rec, info={**rec.info, "sync_failed": str(exc)})
-    return Reconstruction(
-        points3d=rec.points3d,
-        affinity=rec.affinity,
-        order=rec.order,
-        info={**rec.info, "method_ran": rec.info.get("method_ran", name)},
-    )
+    return replace(rec, info={**rec.info, "method_ran": rec.info.get("method_ran", name)})
