@@ -21,6 +21,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _table import spaced  # noqa: E402
 
 from gttdata.recipe import load_recipe  # noqa: E402
 from gttnet.data import RecipeSource  # noqa: E402
@@ -43,11 +44,12 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     for name in args.recipes.split(","):
         src = RecipeSource(load_recipe(f"recipes/gttdata/{name}.yaml"), args.split)
-        n = min(args.n_seq, len(src))
+        picks = spaced(len(src), args.n_seq)
+        n = len(picks)
         for seq in args.sequencing.split(","):
             pinned, auto, noise = [], [], []
-            for i in range(n):
-                obs, gt = src.view(i * max(1, len(src) // n), seq, "orig")
+            for idx in picks:
+                obs, gt = src.view(idx, seq, "orig")
                 pinned.append(mpjpe_mm(reconstruct(obs, "gttnet").points3d, gt.points3d))
                 rec = reconstruct(obs, "gttnet", lambda2="auto")
                 auto.append(mpjpe_mm(rec.points3d, gt.points3d))

@@ -21,6 +21,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _table import spaced  # noqa: E402
 
 from gttdata.recipe import load_recipe  # noqa: E402
 from gttnet.data import RecipeSource  # noqa: E402
@@ -45,11 +46,11 @@ def main() -> None:
     cols = ("dloe", "gttnet", "stream-sync", "unchecked", "auto", "sync")
     for name in args.recipes.split(","):
         src = RecipeSource(load_recipe(f"recipes/gttdata/{name}.yaml"), args.split)
-        n = min(args.n_seq, len(src))
+        picks = spaced(len(src), args.n_seq)
+        n = len(picks)
         err: dict[str, list[float]] = {k: [] for k in cols}
         fell = 0
-        for i in range(n):
-            idx = i * max(1, len(src) // n)
+        for idx in picks:
             obs, gt = src.view(idx, "none", "orig")
             for method in ("dloe", "gttnet", "stream-sync"):
                 err[method].append(mpjpe_mm(reconstruct(obs, method).points3d, gt.points3d))
