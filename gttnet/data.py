@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from gttdata.capture.views import GroundTruth, Observations, make_view
-from gttnet.model.inputs import SequenceInput, prepare_inputs
+from gttnet.model.inputs import SequenceInput, prepare_inputs, prepare_stream_ordered_inputs
 
 __all__ = [
     "TrainItem",
@@ -42,6 +42,8 @@ class TrainItem:
         target_binary: Binary A^G over each image's neighbourhood, shape ``(N, K)``.
         target_continuous: Continuous A^G (interpolation weights) over the neighbourhood, shape ``(N, K)``.
         name: Sample name and condition, for logs.
+        condition: The capture's sequencing condition (``inputs.sequencing`` differs when an order-free
+            capture is presented with estimated camera streams).
     """
 
     inputs: SequenceInput
@@ -49,15 +51,16 @@ class TrainItem:
     target_binary: torch.Tensor
     target_continuous: torch.Tensor
     name: str
+    condition: str = ""
 
     def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> TrainItem:
         """Move every tensor to ``device`` (floating ones cast to ``dtype``)."""
-        return TrainItem(
+        return replace(
+            self,
             inputs=self.inputs.to(device, dtype),
             points3d=self.points3d.to(device=device, dtype=dtype),
             target_binary=self.target_binary.to(device=device, dtype=dtype),
             target_continuous=self.target_continuous.to(device=device, dtype=dtype),
-            name=self.name,
         )
 
     def rotated(self, R: torch.Tensor) -> TrainItem:
@@ -88,7 +91,9 @@ def affinity_targets(gt_nbr: np.ndarray, gt_w: np.ndarray, nbr: np.ndarray) -> t
     return binary.astype(np.float64), cont
 
 
-def prepare_item(obs: Observations, gt: GroundTruth, *, k: int, name: str = "") -> TrainItem:
+def prepare_item(
+    obs: Observations, gt: GroundTruth, *, k: int, name: str = "", stream_order: bool = False
+) -> TrainItem:
     """Network inputs (from ``obs`` only) and supervision (from ``gt``) for one view of a capture.
 
     Args:
@@ -96,11 +101,19 @@ def prepare_item(obs: Observations, gt: GroundTruth, *, k: int, name: str = "") 
         gt: The matching ground truth.
         k: Neighbours per image K.
         name: Label for logs.
+        stream_order: An order-free ``obs`` gets the inputs inference gives it with ``stream_order`` on
+            (:func:`gttnet.model.inputs.prepare_stream_ordered_inputs`, estimated camera streams); other
+            conditions are unaffected.
 
     Returns:
         A :class:`TrainItem` on the CPU (float32).
     """
-    inputs = prepare_inputs(obs, k=k)
+    if stream_order and obs.sequencing == "none":
+        from gttnet.model.inference import STREAM_ORDER_K
+
+        inputs = prepare_stream_ordered_inputs(obs, k=k, order_k=STREAM_ORDER_K)
+    else:
+        inputs = prepare_inputs(obs, k=k)
     binary, cont = affinity_targets(gt.affinity_nbr, gt.affinity_w, inputs.nbr.numpy())
     return TrainItem(
         inputs=inputs,
@@ -108,6 +121,7 @@ def prepare_item(obs: Observations, gt: GroundTruth, *, k: int, name: str = "") 
         target_binary=torch.as_tensor(binary, dtype=torch.float32),
         target_continuous=torch.as_tensor(cont, dtype=torch.float32),
         name=f"{name}:{obs.sequencing}",
+        condition=obs.sequencing,
     )
 
 
@@ -294,6 +308,7 @@ class SequenceDataset(torch.utils.data.Dataset):
             DataLoader worker and kept for resumption) or ``"none"``.
         cache_dir: Directory of the disk cache.
         indices: Sample indices to use (default: all).
+        stream_order: Order-free items get estimated camera streams (:func:`prepare_item`).
     """
 
     def __init__(
@@ -307,12 +322,14 @@ class SequenceDataset(torch.utils.data.Dataset):
         cache: str = "memory",
         cache_dir: str | Path | None = None,
         indices: Sequence[int] | None = None,
+        stream_order: bool = False,
     ) -> None:
         if cache not in ("memory", "disk", "none"):
             raise ValueError(f"cache must be 'memory', 'disk' or 'none', got {cache!r}")
         if cache == "disk" and cache_dir is None:
             raise ValueError("cache 'disk' needs a cache_dir")
         self.source, self.k, self.seed, self.cache = source, k, seed, cache
+        self.stream_order = stream_order
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         names = [s for s, w in sequencing.items() if w > 0]
         w = np.array([sequencing[s] for s in names], dtype=np.float64)
@@ -337,14 +354,15 @@ class SequenceDataset(torch.utils.data.Dataset):
         path = None
         if self.cache == "disk":
             assert self.cache_dir is not None  # checked in __init__
-            path = self.cache_dir / f"{index:06d}-{sequencing}-{variant}-k{self.k}.pt"
+            streams = "-streams" if self.stream_order and sequencing == "none" else ""
+            path = self.cache_dir / f"{index:06d}-{sequencing}{streams}-{variant}-k{self.k}.pt"
             if path.is_file():
                 try:
                     return torch.load(path, weights_only=False)
                 except Exception:  # noqa: BLE001 - a damaged cache entry is rebuilt, never trusted
                     log.warning("%s: unreadable cached item, rebuilding it", path)
         obs, gt = self.source.view(index, sequencing, variant)
-        item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}")
+        item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(f".{os.getpid()}.tmp")

@@ -140,6 +140,7 @@ def _prepare(
         "sequencing": spec.sequencing,
         "seed": recipe.seed,
         "cache": spec.cache,
+        "stream_order": spec.stream_order,
     }
     cache = run_dir / "item_cache"
     train_set = SequenceDataset(

@@ -94,6 +94,11 @@ class DataSpec:
         cache: Where prepared items (X_init, neighbourhoods, targets) are kept after first use: ``"disk"``
             (``RUN_DIR/item_cache``, shared by all workers, removed when the run finishes), ``"memory"``
             (per worker process) or ``"none"``.
+        stream_order: Present order-free (``none``) sequences as inference does by default for a model
+            without a PointNet front end: each camera's images ordered by the pseudo-triangulated poses and
+            the capture given to the network as a ``partial`` one, its chain links weighted by pose
+            similarity (:func:`gttnet.model.inputs.prepare_stream_ordered_inputs`), so a model trained for
+            ``none`` sees the inputs it will be run on.
     """
 
     sources: list[SourceSpec] = field(default_factory=lambda: [SourceSpec()])
@@ -103,6 +108,7 @@ class DataSpec:
     variants: list[str] = field(default_factory=lambda: ["orig"])
     num_workers: int = 0
     cache: str = "disk"
+    stream_order: bool = False
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,7 @@ def validate(model: GTTNet, stage: Stage, items: list[TrainItem]) -> dict:
             parts_sum[k] = parts_sum.get(k, 0.0) + float(v) / len(items)
         gt = _numpy(item.points3d)
         mpjpe.append(mpjpe_mm(_numpy(out[0].x_est), gt))
-        per_condition.setdefault(item.inputs.sequencing, []).append(mpjpe[-1])
+        per_condition.setdefault(item.condition or item.inputs.sequencing, []).append(mpjpe[-1])
         mpjpe_init.append(mpjpe_mm(_numpy(item.inputs.x_init), gt))
         aff = out[0].affinity
         real = aff.mask.gather(1, aff.keep)

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from gttnet.data import EpochStream, SequenceDataset, _open_one, affinity_targets, open_source, prepare_item
+from gttnet.model.inputs import prepare_stream_ordered_inputs
 from gttnet.train.checkpoint import load_checkpoint
 from gttnet.train.loop import train, window_means
 from gttnet.train.recipe import RecipeError, load_train_recipe, parse_train_recipe
@@ -159,6 +160,25 @@ def test_prepare_item_inputs_do_not_depend_on_ground_truth(scene_factory):
     b = prepare_item(obs, gt_bad, k=4)
     torch.testing.assert_close(a.inputs.x_init, b.inputs.x_init)
     assert not torch.allclose(a.points3d, b.points3d)
+
+
+def test_stream_ordered_items_match_what_inference_feeds_the_network(scene_factory):
+    # data.stream_order: an order-free capture is trained on the inputs `--method gttnet` gives it (estimated
+    # camera streams, pose-weighted chain), and still counts as `none` in validation.
+    from gttdata.capture.views import make_view
+    from gttnet.model.inference import STREAM_ORDER_K
+
+    sample = scene_factory(n_joints=4, frames_per_camera=8, sigma_px=1.0)
+    obs, gt = make_view(sample, "none")
+    plain, streams = prepare_item(obs, gt, k=4), prepare_item(obs, gt, k=4, stream_order=True)
+    assert plain.inputs.sequencing == "none" and plain.inputs.chain is None and plain.condition == "none"
+    assert streams.inputs.sequencing == "partial" and streams.condition == "none"
+    ref = prepare_stream_ordered_inputs(obs, k=4, order_k=STREAM_ORDER_K)
+    assert torch.equal(streams.inputs.nbr, ref.nbr) and torch.equal(streams.inputs.chain, ref.chain)
+    assert streams.rotated(torch.eye(3)).condition == "none" == streams.to("cpu").condition
+    full, gt_full = make_view(sample, "full")  # other conditions are untouched
+    a, b = prepare_item(full, gt_full, k=4, stream_order=True), prepare_item(full, gt_full, k=4)
+    assert torch.equal(a.inputs.nbr, b.inputs.nbr) and a.condition == "full"
 
 
 def test_dataset_draws_are_keyed_not_stateful(tmp_path):
