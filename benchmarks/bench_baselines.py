@@ -37,12 +37,18 @@ LEVEL = {"none": 0, "partial": 1, "full": 2}
 
 
 def parse_method(spec: str) -> tuple[str, dict]:
-    """``"dloe:lambda2=0.11,max_iter=10"`` -> ``("dloe", {"lambda2": 0.11, "max_iter": 10})``."""
+    """``"dloe:lambda2=0.11;max_iter=10"`` -> ``("dloe", {"lambda2": 0.11, "max_iter": 10})``.
+
+    Values are JSON; one that is not (``gttnet:model=runs/x/model.pt``) is taken as a string.
+    """
     name, _, opts = spec.partition(":")
     options = {}
     for item in filter(None, opts.split(";")):
         k, _, v = item.partition("=")
-        options[k] = json.loads(v)
+        try:
+            options[k] = json.loads(v)
+        except json.JSONDecodeError:
+            options[k] = v
     return name, options
 
 

@@ -151,7 +151,7 @@ def test_long_training_curves_match_their_log(tmp_path):
     made = plot_learning_curves(
         history,
         tmp_path / "curves.png",
-        title="bundled CMU-31 model continued on the CPU: stage 2, 30,000-step cosine schedule, first 26,100 steps",
+        title="bundled CMU-31 model continued on the CPU: stage 2, 30,000-step cosine schedule, all 30,000 steps",
     )
     assert made is not None
     assert_images_match(made, FIGURES / "training_curves_long.png")
