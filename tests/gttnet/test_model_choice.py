@@ -82,6 +82,7 @@ def test_shipped_order_free_model_verifies_and_fits_cmu31():
     model = inference.load_model(inference.BUNDLED_NONE_MODEL)  # checks the card's sha256
     assert model.config.n_joints == card["config"]["n_joints"] == 31
     assert card["recipe"]["data"]["sequencing"] == {"none": 1.0}
+    assert card["recipe"]["data"]["stream_order"] is True  # trained on the inputs inference gives it
 
 
 def test_shipped_pointnet_model_reads_an_authors_17_joint_file_without_model(tmp_path):
