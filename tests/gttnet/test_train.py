@@ -82,10 +82,11 @@ def test_every_recipe_runs_one_step_per_stage(path, tmp_path, monkeypatch):
     if "n_joints" in recipe.model.settings:  # a single-topology recipe of another skeleton: fit the tiny data
         overrides.append("model.settings.n_joints=31")
     if recipe.model.init is not None and not Path(recipe.model.init).exists():
-        # It starts from another recipe's run (runs/default/model.pt); the bundled model has its architecture.
-        from gttnet.model.inference import BUNDLED_MODEL
+        # It starts from another recipe's run (runs/default/model.pt); a bundled model has its architecture.
+        from gttnet.model.inference import BUNDLED_MODEL, BUNDLED_POINTNET_MODEL
 
-        overrides.append(f"model.init={BUNDLED_MODEL}")
+        bundled = BUNDLED_POINTNET_MODEL if recipe.model.builder == "gttnet_pointnet" else BUNDLED_MODEL
+        overrides.append(f"model.init={bundled}")
     res = train(load_train_recipe(path, overrides), out=tmp_path / "run", progress=False)
     assert res.finished and res.state.global_step == n
     assert all(np.isfinite(h["loss"]) for h in res.state.history if "loss" in h)
