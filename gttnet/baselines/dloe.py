@@ -192,7 +192,12 @@ def _scatter(cand: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
 
 @register_method("dloe", requires="none", summary="DLOE alternating W/D/X optimisation (Xu & Dunn 2019)")
 def reconstruct_dloe(
-    obs: Observations, *, xstep_method: str = "auto", candidates: str = "dense", **overrides
+    obs: Observations,
+    *,
+    xstep_method: str = "auto",
+    candidates: str = "dense",
+    x_start: np.ndarray | None = None,
+    **overrides,
 ) -> Reconstruction:
     """DLOE: alternate the W-step, D-step and X-step from the pseudo-triangulation ``X_init``.
 
@@ -211,6 +216,10 @@ def reconstruct_dloe(
             search and the default), ``"kdtree"`` (:mod:`gttnet.geometry.candidates`: X_init, W-step
             candidates and convergences from the candidate pairs only) or ``"auto"`` (k-d tree above
             600 images).
+        x_start: Structure the first W-step is fitted to, shape ``(N, J, 3)``, world metres; None starts
+            from ``X_init``. Another method's estimate here makes DLOE a refinement of it (GTT-Net's
+            ``refine``); the X-step's vanishing ridge still pulls toward ``X_init``, which ground truth never
+            enters.
         **overrides: Fields of :class:`DLOEParams`.
 
     Returns:
@@ -246,7 +255,12 @@ def reconstruct_dloe(
         W_const = chain_affinity(obs.cam_id, obs.stream_index, row_normalise=True)
     else:
         W_const = np.zeros((n, n))
-    X = x_init
+    if x_start is None:
+        X = x_init
+    else:
+        X = np.asarray(x_start, dtype=np.float64)
+        if X.shape != x_init.shape:
+            raise ValueError(f"x_start must have shape {x_init.shape} (N, J, 3), got {X.shape}")
     d = np.ones(n)
     w = None
     deltas: list[float] = []

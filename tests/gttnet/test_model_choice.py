@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -63,6 +64,21 @@ def test_cli_gttnet_on_authors_17_joint_file(tmp_path, pointnet_bundle, coco_sam
     # --model overrides the choice: the CMU-31 model refuses 17 joints with one line.
     res = CliRunner().invoke(main, [*args, "--model", str(inference.BUNDLED_MODEL)])
     assert res.exit_code != 0 and "31 joints" in res.output and "Traceback" not in res.output
+
+
+def test_pointnet_polishes_with_dloe_by_default_without_sequencing(pointnet_bundle, coco_sample):
+    from gttnet.baselines.dloe import reconstruct_dloe
+
+    obs, _ = make_view(coco_sample, "none", seed=0)
+    assert inference.REFINE_DEFAULT[(True, "none")] and not inference.REFINE_DEFAULT.get((False, "none"))
+    raw = inference.reconstruct_gttnet(obs, refine=False)
+    rec = inference.reconstruct_gttnet(obs)
+    assert rec.info["refined"] and not raw.info["refined"] and rec.info["refine_iterations"] >= 1
+    # The refinement is DLOE's alternation started at the network's structure, nothing more.
+    np.testing.assert_array_equal(
+        rec.points3d, reconstruct_dloe(obs, candidates="auto", x_start=raw.points3d).points3d
+    )
+    assert not np.array_equal(rec.points3d, raw.points3d)
 
 
 @pytest.mark.parametrize("installed", [True, False])
