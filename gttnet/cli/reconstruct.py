@@ -505,6 +505,14 @@ def reconstruct_cmd(
             err=True,
         )
     check_sequencing(obs, spec_m)
+    blind = int((~obs.visible.any(axis=1)).sum())
+    if blind and obs.sequencing == "none" and not quiet:
+        click.echo(
+            f"warning: {blind} of {obs.n_images} images see no joint; without sequencing nothing places them, "
+            "so their 3-D poses are placeholders (each camera's frame order, --sequencing partial, "
+            "interpolates them)",
+            err=True,
+        )
     try:
         if subjects > 1:
             if loaded is None:
@@ -526,6 +534,8 @@ def reconstruct_cmd(
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
+    if blind:
+        summary["images_without_joints"] = blind
     if out_paths:
         try:
             _write_outputs(

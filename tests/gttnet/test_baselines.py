@@ -314,3 +314,34 @@ def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
     assert summary["nan_joints"] == [3] and np.isfinite(summary["mpjpe_mm"])
     _, _, points, _ = read_trc(trc)
     assert np.isnan(points[:, 3]).all() and np.isfinite(np.delete(points, 3, axis=1)).all()
+
+
+@pytest.mark.parametrize("sequencing", ["none", "partial"])
+def test_cli_warns_about_images_that_see_no_joint(tmp_path, scene, sequencing):
+    """Without sequencing an image with no detection cannot be placed: the CLI says so and counts them."""
+    from click.testing import CliRunner
+
+    from gttnet.cli import main
+
+    vis = scene.visible.copy()
+    vis[:5] = False
+    px = np.where(vis[..., None], scene.keypoints_px, np.nan)
+    path = tmp_path / "cap.json"
+    write_gttnet_json(dataclasses.replace(scene, visible=vis, keypoints_px=px), path)
+    args = [
+        "reconstruct",
+        str(path),
+        "--units",
+        "m",
+        "--method",
+        "dloe",
+        "--sequencing",
+        sequencing,
+        "--json",
+    ]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output.strip().splitlines()[-1])
+    assert summary["images_without_joints"] == 5
+    warned = f"warning: 5 of {scene.n_images} images see no joint" in res.output
+    assert warned == (sequencing == "none")
