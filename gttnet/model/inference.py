@@ -27,6 +27,7 @@ __all__ = [
     "BUNDLED_NONE_MODEL",
     "BUNDLED_POINTNET_MODEL",
     "REFINE_DEFAULT",
+    "REFINE_ROUNDS",
     "STREAM_ORDER_K",
     "bundled_model_for",
     "MODEL_FORMAT",
@@ -51,15 +52,24 @@ BUNDLED_POINTNET_MODEL = BUNDLED_MODEL.with_name("gttnet_pointnet.pt")
 #: splits (bundled CMU-31 models, none, mean MPJPE mm for k = 16 / 32 / 64): paper protocol (16 captures)
 #: 257.0 / 249.2 / 254.1, CMU (10) 229.8 / 226.2 / 225.9, the mixed default set (20) 304.4 / 301.7 / 310.1.
 STREAM_ORDER_K = 32
-#: Whether ``--method gttnet`` polishes the network's structure with DLOE's alternation by default, per
+#: DLOE rounds (W-, D- and X-step) of the refinement. One: on the validation captures below, one round was
+#: both the most accurate and the cheapest (PointNet model, 24 human + 8 hand captures, sum of means for
+#: 1 / 2 / all rounds: none 67.14 / 67.45 / 67.77 mm, partial 34.12 / 41.01 / 43.31 mm; 0.09 / 0.13 / 0.33 s
+#: per capture); more rounds pull the structure back toward DLOE's own solution.
+REFINE_ROUNDS = 1
+#: Whether ``--method gttnet`` polishes the network's structure with a DLOE round by default, per
 #: ``(PointNet variant, sequencing)``; pairs not listed do not. Chosen on each model's validation captures
-#: by the rule that replaces models (sum of validation means at least 2 % lower), mean MPJPE mm without /
-#: with: PointNet (24 human + 8 hand captures) none 67.62 + 4.07 / 63.87 + 3.90 (-5.5 %), partial
-#: 50.89 + 3.56 / 39.85 + 3.46 (-20 %), full 13.71 + 3.12 / 13.51 + 3.01 (-1.8 %: off). CMU-31 models
-#: (paper 16 + CMU 10 + default 20 captures): none 726.1 / 721.9 (-0.6 %: off), full 195.5 / 264.7 (worse:
-#: off), partial 686.5 / 672.0 (-2.1 %, left off: it would cost DLOE's time on top of the network's for
-#: a gain at the threshold; ``refine=True`` opts in).
-REFINE_DEFAULT: dict[tuple[bool, str], bool] = {(True, "none"): True, (True, "partial"): True}
+#: by the rule that replaces models (sum of validation means at least 2 % lower), mean MPJPE mm, network
+#: alone / refined: PointNet (24 human + 8 hand captures) none 67.62 + 4.07 / 63.27 + 3.87 (-6.3 %),
+#: partial 50.89 + 3.56 / 30.69 + 3.43 (-37 %), full 13.71 + 3.12 / 11.84 + 3.00 (-12 %); CMU-31 models
+#: (paper 16 + CMU 10 + default 20 captures) partial 686.5 / 609.6 (-11 %), none 726.1 / 721.0 (-0.7 %:
+#: off), full 195.5 / 252.4 (worse on the captures that fail: off).
+REFINE_DEFAULT: dict[tuple[bool, str], bool] = {
+    (True, "none"): True,
+    (True, "partial"): True,
+    (True, "full"): True,
+    (False, "partial"): True,
+}
 
 
 def bundled_model_for(skeleton, sequencing: str | None = None) -> Path:
@@ -204,12 +214,12 @@ class GTTNetReconstructor:
                 the camera streams (:func:`gttnet.geometry.noise.auto_lambda2`: the given streams, or under
                 ``none`` the estimated ones) and weights each image for its own depth; pinned where no
                 stream is long enough. ``info["noise_px"]`` and ``info["lambda2"]`` (median) report it.
-            refine: Run DLOE's alternation (:func:`gttnet.baselines.dloe.reconstruct_dloe`) from the
-                network's structure instead of from the pseudo-triangulation: the learned affinity picks
-                the starting point, DLOE's W-, D- and X-steps polish it with the same ray weight. None:
-                the default for the model and sequencing (:data:`REFINE_DEFAULT`); about 1.6x DLOE's time
-                at 300 images. ``info["refined"]`` says whether it ran, ``info["refine_iterations"]`` how
-                many rounds.
+            refine: Run :data:`REFINE_ROUNDS` of DLOE's alternation
+                (:func:`gttnet.baselines.dloe.reconstruct_dloe`) from the network's structure instead of
+                from the pseudo-triangulation: the learned affinity picks the starting point, DLOE's W-, D-
+                and X-steps polish it with the same ray weight. None: the default for the model and
+                sequencing (:data:`REFINE_DEFAULT`). ``info["refined"]`` says whether it ran,
+                ``info["refine_iterations"]`` how many rounds.
 
         Returns:
             :class:`Reconstruction` with points3d (N, J, 3) in world metres, the solver's (or, refined,
@@ -254,7 +264,9 @@ class GTTNetReconstructor:
             from gttnet.baselines.dloe import reconstruct_dloe
 
             ray_kw = {} if ray_weight is None else {"lambda2": ray_weight}
-            polished = reconstruct_dloe(obs, candidates=self.candidates, x_start=x_est, **ray_kw)
+            polished = reconstruct_dloe(
+                obs, candidates=self.candidates, x_start=x_est, max_iter=REFINE_ROUNDS, **ray_kw
+            )
             x_est, affinity = polished.points3d, polished.affinity
             refine_iterations = polished.info["iterations"]
         if pose_rank is not None:

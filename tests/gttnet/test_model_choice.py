@@ -71,13 +71,16 @@ def test_pointnet_polishes_with_dloe_by_default_without_sequencing(pointnet_bund
 
     obs, _ = make_view(coco_sample, "none", seed=0)
     assert inference.REFINE_DEFAULT[(True, "none")] and not inference.REFINE_DEFAULT.get((False, "none"))
+    assert not inference.REFINE_DEFAULT.get((False, "full"))
     raw = inference.reconstruct_gttnet(obs, refine=False)
     rec = inference.reconstruct_gttnet(obs)
-    assert rec.info["refined"] and not raw.info["refined"] and rec.info["refine_iterations"] >= 1
+    assert rec.info["refined"] and not raw.info["refined"]
+    assert rec.info["refine_iterations"] == inference.REFINE_ROUNDS
     # The refinement is DLOE's alternation started at the network's structure, nothing more.
-    np.testing.assert_array_equal(
-        rec.points3d, reconstruct_dloe(obs, candidates="auto", x_start=raw.points3d).points3d
+    polished = reconstruct_dloe(
+        obs, candidates="auto", x_start=raw.points3d, max_iter=inference.REFINE_ROUNDS
     )
+    np.testing.assert_array_equal(rec.points3d, polished.points3d)
     assert not np.array_equal(rec.points3d, raw.points3d)
 
 
