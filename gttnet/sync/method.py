@@ -216,9 +216,9 @@ def order_free_fallback(obs: Observations) -> str:
     GTT-Net where a bundled model was trained on the input's skeleton (CMU-31: lowest sum of validation means
     without sequencing, 547 against DLOE's 583 mm over the paper, CMU and default validation captures). For
     any other skeleton, GTT-Net's cross-domain model with each camera's frame order (``partial``: on its
-    training families' validation captures, refined, 39.85 + 3.46 against DLOE's 54.19 + 4.03 mm, humans +
-    hands) and DLOE without it (there the cross-domain model is 0.5 % lower on those captures, short of the
-    2 % a default needs: 63.87 + 3.90 against 63.96 + 4.18 mm).
+    training families' validation captures, refined, 30.69 + 3.43 against DLOE's 54.19 + 4.03 mm, humans +
+    hands) and DLOE without it (there the cross-domain model is 1.5 % lower on those captures, short of the
+    2 % a default needs: 63.27 + 3.87 against 63.96 + 4.18 mm).
     """
     from gttdata.skeleton import CMU31_JOINTS
     from gttnet.model.inference import BUNDLED_MODEL, BUNDLED_NONE_MODEL, BUNDLED_POINTNET_MODEL
