@@ -23,7 +23,8 @@ def _method_fields(rec) -> dict:
     """The method fields of a reconstruction's report.
 
     ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto"),
-    ``nan_joints`` (indices of the joints left NaN: never observed, or too few rays for the method) and,
+    ``nan_joints`` (indices of the joints left NaN: never observed, or too few rays for the method),
+    ``refined`` (GTT-Net: whether a DLOE round followed the network) and,
     after clock recovery, ``clock_offsets_s`` ({camera: s}). Where joints are NaN, ``mpjpe_mm`` is over
     the others.
     """
@@ -32,6 +33,8 @@ def _method_fields(rec) -> dict:
         out["requested_method"] = rec.method
     if rec.nan_joints.size:
         out["nan_joints"] = rec.nan_joints.tolist()
+    if "refined" in rec.info:
+        out["refined"] = bool(rec.info["refined"])
     if "clock_offsets_s" in rec.info:
         out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
     return out
@@ -399,6 +402,12 @@ def _resolve_input(
 @click.option(
     "--model", "model_path", type=click.Path(dir_okay=False), default=None, help="Trained model (gttnet)."
 )
+@click.option(
+    "--refine/--no-refine",
+    default=None,
+    help="gttnet: one DLOE round after the network, or the network alone (default: the model's choice per "
+    "sequencing, docs/MODEL_CARD.md).",
+)
 @click.option("--seed", type=int, default=None, help="Seed of the image shuffle under --sequencing none.")
 @click.option(
     "--subjects",
@@ -443,6 +452,7 @@ def reconstruct_cmd(
     resample_hz,
     as_json,
     model_path,
+    refine,
     seed,
     subjects,
     window,
@@ -478,6 +488,12 @@ def reconstruct_cmd(
     options = {"model": model_path} if model_path is not None else {}
     if model_path is not None and method != "gttnet":
         raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
+    if refine is not None:
+        if method != "gttnet":
+            raise click.BadParameter(
+                "--refine/--no-refine apply only to --method gttnet", param_hint="--refine"
+            )
+        options["refine"] = refine
     inp = _resolve_input(
         input_paths,
         weights,

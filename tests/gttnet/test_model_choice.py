@@ -84,6 +84,23 @@ def test_pointnet_polishes_with_dloe_by_default_without_sequencing(pointnet_bund
     assert not np.array_equal(rec.points3d, raw.points3d)
 
 
+def test_cli_refine_switch(tmp_path, pointnet_bundle, coco_sample):
+    from gttnet.cli import main
+    from gttnet.io.gttnet_json import write_gttnet_json
+
+    path = write_gttnet_json(coco_sample, tmp_path / "cap.json")
+    base = ["reconstruct", str(path), "--sequencing", "none", "--json", "--seed", "0"]
+    out = {}
+    for flag in ("--refine", "--no-refine"):
+        res = CliRunner().invoke(main, [*base, "--method", "gttnet", flag])
+        assert res.exit_code == 0, res.output
+        out[flag] = json.loads(res.output.strip().splitlines()[-1])
+    assert out["--refine"]["refined"] is True and out["--no-refine"]["refined"] is False
+    assert out["--refine"]["mpjpe_mm"] != out["--no-refine"]["mpjpe_mm"]
+    res = CliRunner().invoke(main, [*base, "--method", "dloe", "--no-refine"])
+    assert res.exit_code != 0 and "apply only to --method gttnet" in res.output
+
+
 @pytest.mark.parametrize("installed", [True, False])
 def test_cmu31_without_sequencing_uses_the_order_free_model_when_installed(installed, tmp_path, monkeypatch):
     none_model = tmp_path / "gttnet_default_none.pt"
