@@ -485,15 +485,7 @@ def reconstruct_cmd(
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--method") from exc
     _check_outs(out_paths, overwrite)
-    options = {"model": model_path} if model_path is not None else {}
-    if model_path is not None and method != "gttnet":
-        raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
-    if refine is not None:
-        if method != "gttnet":
-            raise click.BadParameter(
-                "--refine/--no-refine apply only to --method gttnet", param_hint="--refine"
-            )
-        options["refine"] = refine
+    options = _gttnet_options(method, model_path, refine)
     inp = _resolve_input(
         input_paths,
         weights,
@@ -570,6 +562,22 @@ def reconstruct_cmd(
         return
     parts = [f"{k}={v}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+
+
+def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
+    """The method options of ``--model`` and ``--refine/--no-refine``, which apply to ``gttnet`` only."""
+    options: dict[str, Any] = {}
+    if model_path is not None:
+        if method != "gttnet":
+            raise click.BadParameter("--model applies only to --method gttnet", param_hint="--model")
+        options["model"] = model_path
+    if refine is not None:
+        if method != "gttnet":
+            raise click.BadParameter(
+                "--refine/--no-refine apply only to --method gttnet", param_hint="--refine"
+            )
+        options["refine"] = refine
+    return options
 
 
 def _report_recording(view, rec, gt_points) -> dict:
