@@ -279,6 +279,12 @@ def test_a_trajectory_prior_leaves_an_undetermined_joint_nan(scene, caplog, meth
     assert np.allclose(rec.points3d[:, 0], reconstruct(obs, method, **options).points3d[:, 0])
 
 
+def _write_hidden(scene, visible, path):
+    """``scene`` as a GTT-Net JSON file with only ``visible`` observed (the others' pixels NaN)."""
+    px = np.where(visible[..., None], scene.keypoints_px, np.nan)
+    return write_gttnet_json(dataclasses.replace(scene, visible=visible, keypoints_px=px), path)
+
+
 def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
     """The CLI keeps a valid JSON summary (MPJPE over the reconstructed joints) and writes the gap out."""
     from click.testing import CliRunner
@@ -288,10 +294,7 @@ def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
 
     vis = scene.visible.copy()
     vis[:, 3] = False
-    px = scene.keypoints_px.copy()
-    px[:, 3] = np.nan
-    path = tmp_path / "cap.json"
-    write_gttnet_json(dataclasses.replace(scene, visible=vis, keypoints_px=px), path)
+    path = _write_hidden(scene, vis, tmp_path / "cap.json")
     trc = tmp_path / "out.trc"
     res = CliRunner().invoke(
         main,
@@ -325,9 +328,7 @@ def test_cli_warns_about_images_that_see_no_joint(tmp_path, scene, sequencing):
 
     vis = scene.visible.copy()
     vis[:5] = False
-    px = np.where(vis[..., None], scene.keypoints_px, np.nan)
-    path = tmp_path / "cap.json"
-    write_gttnet_json(dataclasses.replace(scene, visible=vis, keypoints_px=px), path)
+    path = _write_hidden(scene, vis, tmp_path / "cap.json")
     args = [
         "reconstruct",
         str(path),
