@@ -282,7 +282,8 @@ def test_a_trajectory_prior_leaves_an_undetermined_joint_nan(scene, caplog, meth
 def _write_hidden(scene, visible, path):
     """``scene`` as a GTT-Net JSON file with only ``visible`` observed (the others' pixels NaN)."""
     px = np.where(visible[..., None], scene.keypoints_px, np.nan)
-    return write_gttnet_json(dataclasses.replace(scene, visible=visible, keypoints_px=px), path)
+    write_gttnet_json(dataclasses.replace(scene, visible=visible, keypoints_px=px), path)
+    return path
 
 
 def test_cli_reports_a_never_seen_joint_and_writes_gaps(tmp_path, scene):
