@@ -236,7 +236,7 @@ def reconstruct_subjects(
         method: Registered method returning an affinity (``dloe``, ``pseudo``, ``gttnet``).
         refine: Run step 5.
         seed: Seed of the random order of the virtual images.
-        **options: Method options.
+        **options: Method options (the clustering pass runs ``gttnet`` without its DLOE round).
 
     Returns:
         The :class:`MultiSubjectResult`.
@@ -251,7 +251,9 @@ def reconstruct_subjects(
     shuffle = np.random.default_rng(seed).permutation(2 * n)  # hide the (n, k) layout from the method
     inv = np.argsort(shuffle)
     vobs = vobs.take(shuffle)
-    vrec = reconstruct(vobs, method, **options)
+    # gttnet clusters with its learned affinity (as measured), not the weights of its DLOE round.
+    vopts = {"refine": False, **options} if method == "gttnet" else options
+    vrec = reconstruct(vobs, method, **vopts)
     if vrec.affinity is None:
         raise ValueError(f"method {method!r} returns no affinity; use dloe, pseudo or gttnet")
     A = vrec.affinity[np.ix_(inv, inv)]

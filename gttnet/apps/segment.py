@@ -201,13 +201,16 @@ def segment_capture(obs, *, method: str = "dloe", n_events: int | None = None, *
         obs: :class:`~gttdata.capture.views.Observations` (ground truth never enters).
         method: Registered method returning an affinity (``dloe``, ``pseudo``, ``gttnet``).
         n_events: Known number of events, or None.
-        **options: Method options.
+        **options: Method options (``gttnet`` runs without its DLOE round unless ``refine=True``).
 
     Returns:
         ``(reconstruction, segmentation)``.
     """
     from gttnet.methods import reconstruct
 
+    if method == "gttnet":
+        # The learned affinity, which the segmentation was measured with, not the DLOE round's weights.
+        options.setdefault("refine", False)
     rec = reconstruct(obs, method, **options)
     if rec.affinity is None:
         raise ValueError(f"method {method!r} returns no affinity; use dloe, pseudo or gttnet")
