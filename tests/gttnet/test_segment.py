@@ -103,3 +103,23 @@ def test_method_without_affinity_is_refused(monkeypatch):
     monkeypatch.setattr(reg, "reconstruct", lambda obs, method, **o: _Rec())
     with pytest.raises(ValueError, match="no affinity"):
         segment_capture(object(), method="x")
+
+
+@pytest.mark.parametrize(
+    "method, given, expected", [("gttnet", {}, False), ("gttnet", {"refine": True}, True)]
+)
+def test_segment_uses_gttnets_learned_affinity_unless_asked(monkeypatch, method, given, expected):
+    import gttnet.methods
+    from gttnet.apps.segment import segment_capture
+    from gttnet.methods import Reconstruction
+
+    seen = {}
+
+    def fake(obs, name, **options):
+        seen.update(options)
+        a, _, _ = _chains([6, 6])
+        return Reconstruction(points3d=np.zeros((12, 2, 3)), affinity=a)
+
+    monkeypatch.setattr(gttnet.methods, "reconstruct", fake)
+    segment_capture(object(), method=method, **given)
+    assert seen["refine"] is expected
