@@ -170,9 +170,10 @@ class GTTNetReconstructor:
             the pseudo-triangulated poses and reconstruct the capture as a ``partial`` one whose chain
             links are weighted by pose similarity
             (:func:`gttnet.model.inputs.prepare_stream_ordered_inputs`); False runs the network on the
-            order-free input as it is. None (default): on for the single-topology GTT-Net, off for the PointNet variant,
-            as chosen on each model's validation captures (docs/MODEL_CARD.md,
-            docs/MODEL_CARD_POINTNET.md). The k-d tree search (large captures) never orders streams.
+            order-free input as it is. None (default): on for the single-topology GTT-Net; for the PointNet
+            variant on when the DLOE round follows the network and off when it runs alone, as chosen on
+            each model's validation captures (docs/MODEL_CARD.md, docs/MODEL_CARD_POINTNET.md). The k-d
+            tree search (large captures) never orders streams.
     """
 
     def __init__(
@@ -189,7 +190,7 @@ class GTTNetReconstructor:
         self.device = torch.device(device)
         self.candidates = candidates
         self.model = load_model(model_path, device=self.device)
-        self.stream_order = not self.model.config.pointnet if stream_order is None else bool(stream_order)
+        self.stream_order = None if stream_order is None else bool(stream_order)
         self.lambda2 = lambda2
 
     @torch.no_grad()
@@ -238,9 +239,12 @@ class GTTNetReconstructor:
         if isinstance(lambda2, str) and lambda2 != "auto":
             raise ValueError(f"lambda2 must be a number, 'auto' or None, got {lambda2!r}")
         cfg = self.model.config
+        if refine is None:
+            refine = REFINE_DEFAULT.get((cfg.pointnet, obs.sequencing), False)
+        stream_order = (not cfg.pointnet or refine) if self.stream_order is None else self.stream_order
         streams = (
             obs.sequencing == "none"
-            and self.stream_order
+            and stream_order
             and not use_candidate_search("none", obs.n_images, self.candidates)
         )
         streams_view, pose_rank = obs, None
@@ -257,8 +261,6 @@ class GTTNetReconstructor:
         out = self.model([seq.to(self.device)], solve=True, top_q=top_q, lambda2=ray_weight, decode=False)[0]
         affinity = out.a_sparse.double().cpu().numpy()
         x_est = out.x_est.double().cpu().numpy()
-        if refine is None:
-            refine = REFINE_DEFAULT.get((cfg.pointnet, obs.sequencing), False)
         refine_iterations = None
         if refine:
             from gttnet.baselines.dloe import reconstruct_dloe

@@ -394,13 +394,20 @@ def test_none_reconstruction_orders_streams_and_keeps_image_order(scene_factory,
     assert rec(partial).info["stream_order"] is False
 
 
-def test_stream_order_default_follows_the_model_family(tmp_path, tiny_model_path):
-    # On for the single-topology network, off for the PointNet variant (each chosen on its validation
-    # captures); an explicit value wins.
+def test_stream_order_default_follows_the_model_family(tmp_path, tiny_model_path, scene_factory):
+    # On for the single-topology network; for the PointNet variant on with its DLOE round and off for the
+    # network alone (each chosen on its validation captures); an explicit value wins.
     pn = inference.save_model(tmp_path / "pn.pt", build_model("gttnet_pointnet", k=6, domains={"toy5": 5}))
-    assert inference.GTTNetReconstructor(tiny_model_path, device="cpu").stream_order is True
-    assert inference.GTTNetReconstructor(pn, device="cpu").stream_order is False
-    assert inference.GTTNetReconstructor(pn, device="cpu", stream_order=True).stream_order is True
+    obs, _ = make_view(scene_factory(n_cameras=3, n_joints=5, frames_per_camera=10, seed=9), "none")
+
+    def ordered(path, stream_order=None, **call):
+        rec = inference.GTTNetReconstructor(path, device="cpu", stream_order=stream_order)
+        return rec(obs, **call).info["stream_order"]
+
+    assert ordered(tiny_model_path) is True and ordered(tiny_model_path, refine=True) is True
+    assert ordered(pn) is True  # refined by default
+    assert ordered(pn, refine=False) is False
+    assert ordered(pn, stream_order=False) is False and ordered(pn, stream_order=True, refine=False) is True
 
 
 def test_a_singular_dloe_system_skips_only_that_sequences_structure_loss(small_view, caplog):

@@ -72,9 +72,10 @@ def test_pointnet_polishes_with_dloe_by_default_without_sequencing(pointnet_bund
     obs, _ = make_view(coco_sample, "none", seed=0)
     assert inference.REFINE_DEFAULT[(True, "none")] and not inference.REFINE_DEFAULT.get((False, "none"))
     assert not inference.REFINE_DEFAULT.get((False, "full"))
-    raw = inference.reconstruct_gttnet(obs, refine=False)
+    # The network's structure as the default path computes it (streams ordered first, as with the round).
+    raw = inference.reconstruct_gttnet(obs, refine=False, stream_order=True)
     rec = inference.reconstruct_gttnet(obs)
-    assert rec.info["refined"] and not raw.info["refined"]
+    assert rec.info["refined"] and not raw.info["refined"] and rec.info["stream_order"]
     assert rec.info["refine_iterations"] == inference.REFINE_ROUNDS
     # The refinement is DLOE's alternation started at the network's structure, nothing more.
     polished = reconstruct_dloe(
