@@ -308,15 +308,18 @@ def test_auto_picks_by_sequencing(capture):
         assert rec.method == "auto" and rec.info["method_ran"] == ran
 
 
-def test_auto_without_sequencing_keeps_dloe_when_the_clocks_do_not_explain_the_images(capture):
-    """Without the true rates (the cameras film different spans here) the clocks fail the check: DLOE runs."""
+def test_auto_without_sequencing_falls_back_when_the_clocks_do_not_explain_the_images(capture):
+    """Without the true rates (the cameras film different spans here) the clocks fail the check.
+
+    The order-free fallback runs instead: the cross-domain GTT-Net for this toy skeleton.
+    """
     from gttnet.methods import reconstruct
     from gttnet.sync.method import STREAM_SYNC_MAX_RMS_PX
 
     obs, _ = make_view(capture, "none")
     rec = reconstruct(obs, "auto")
-    assert rec.info["method_ran"] == "dloe" and rec.info["clock_rms_px"] > STREAM_SYNC_MAX_RMS_PX
-    np.testing.assert_allclose(rec.points3d, reconstruct(obs, "dloe").points3d)
+    assert rec.info["method_ran"] == "gttnet" and rec.info["clock_rms_px"] > STREAM_SYNC_MAX_RMS_PX
+    np.testing.assert_allclose(rec.points3d, reconstruct(obs, "gttnet").points3d)
     kept = reconstruct(obs, "stream-sync", fallback=None)
     assert kept.info["method_ran"] == "stream-sync" and kept.info["clock_rms_px"] == rec.info["clock_rms_px"]
 
@@ -385,11 +388,15 @@ def test_stream_sync_without_any_timing_approaches_sync_with_the_streams():
     np.testing.assert_allclose(same.points3d, reconstruct(part, "sync", fps=rates).points3d)
 
 
-def test_auto_falls_back_on_gttnet_only_for_the_skeleton_its_model_was_trained_on(capture, scene_factory):
+def test_auto_falls_back_on_gttnet_where_a_bundled_model_fits(capture, scene_factory, monkeypatch, tmp_path):
+    from gttnet.model import inference
     from gttnet.sync.method import order_free_fallback
 
-    assert order_free_fallback(make_view(capture, "none")[0]) == "dloe"  # a toy skeleton: DLOE
-    assert order_free_fallback(make_view(capture, "partial")[0]) == "gttnet"  # ... unless streams are given
+    # A toy skeleton: the cross-domain model when it is installed, else DLOE.
+    for sequencing in ("none", "partial"):
+        assert order_free_fallback(make_view(capture, sequencing)[0]) == "gttnet"
+    monkeypatch.setattr(inference, "BUNDLED_POINTNET_MODEL", tmp_path / "absent.pt")
+    assert order_free_fallback(make_view(capture, "none")[0]) == "dloe"
     cmu = scene_factory(n_cameras=3, n_joints=31, frames_per_camera=4)
     assert order_free_fallback(make_view(cmu, "none")[0]) == "gttnet"
 
@@ -401,7 +408,7 @@ def test_stream_sync_falls_back_when_a_camera_has_too_few_images_for_clocks(capt
     keep = np.flatnonzero(obs.cam_id != 2)
     few = obs.take(np.r_[keep, np.flatnonzero(obs.cam_id == 2)[:2]])
     rec = reconstruct(few, "auto")
-    assert rec.info["method_ran"] == "dloe" and rec.info["clock_rms_px"] is None
+    assert rec.info["method_ran"] == "gttnet" and rec.info["clock_rms_px"] is None
     with pytest.raises(GttNetError, match="camera 2 has 2 image"):
         reconstruct(few, "stream-sync", fallback=None)
 
@@ -416,6 +423,6 @@ def test_auto_with_camera_order_falls_back_when_clocks_cannot_be_recovered(captu
     with pytest.raises(GttNetError, match="camera 2 has 2 image"):
         reconstruct(few, "sync")
     rec = reconstruct(few, "auto")
-    # A toy skeleton with each camera's frame order: the cross-domain GTT-Net (DLOE without sequencing).
+    # A toy skeleton: the cross-domain GTT-Net.
     assert rec.info["method_ran"] == "gttnet" and "camera 2 has 2 image" in rec.info["sync_failed"]
     np.testing.assert_allclose(rec.points3d, reconstruct(few, "gttnet").points3d)
