@@ -5,7 +5,7 @@ Run:
 
 On ``--n-seq`` captures spread over each recipe's split, under no sequencing: DLOE, GTT-Net,
 ``stream-sync`` with its check (DLOE where the recovered clocks do not explain the images) and without it
-(``fallback=None``), ``auto`` (the same check, falling back on GTT-Net for CMU-31 input); and, as the bound the estimated streams aim at, ``sync`` on the same capture with its true
+(``fallback=None``), ``auto`` (the same check, falling back on GTT-Net where a bundled model fits); and, as the bound the estimated streams aim at, ``sync`` on the same capture with its true
 camera streams (``partial``, the same frame-rate guess from image counts). Prints a Markdown table: MPJPE (mm) mean and median over the captures, how many
 captures ``auto`` beats DLOE and GTT-Net on, and how often the check fell back. Ground truth is used for
 scoring only.

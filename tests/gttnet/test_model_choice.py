@@ -82,6 +82,10 @@ def test_pointnet_polishes_with_dloe_by_default_without_sequencing(pointnet_bund
         obs, candidates="auto", x_start=raw.points3d, max_iter=inference.REFINE_ROUNDS
     )
     np.testing.assert_array_equal(rec.points3d, polished.points3d)
+    # ... and the recovered order is that of the refined poses.
+    from gttnet.model.inputs import pose_order
+
+    np.testing.assert_array_equal(rec.order, pose_order(rec.points3d, k=16))
     assert not np.array_equal(rec.points3d, raw.points3d)
 
 
