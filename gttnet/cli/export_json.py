@@ -24,12 +24,20 @@ __all__ = ["export_json_cmd", "register"]
     "(the authors' own files are in inches: --units inch).",
 )
 @click.option(
+    "--limbs",
+    "limb_format",
+    type=click.Choice(["adjacency", "pairs"]),
+    default="adjacency",
+    show_default=True,
+    help="limbSeq as the authors publish it (rows [joint, neighbour, ...]) or as one [joint, joint] pair per limb.",
+)
+@click.option(
     "--out", "out_path", type=click.Path(dir_okay=False), required=True, help="The .json file to write."
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing --out file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object describing the file written.")
 @friendly_errors
-def export_json_cmd(input_path, sample, split, variant, units, out_path, overwrite, as_json):
+def export_json_cmd(input_path, sample, split, variant, units, limb_format, out_path, overwrite, as_json):
     """Write a sample in the authors' GTT-Net JSON layout.
 
     Write sample I of INPUT (a shard file, a dataset folder or a generate recipe) in the authors' GTT-Net
@@ -46,7 +54,7 @@ def export_json_cmd(input_path, sample, split, variant, units, out_path, overwri
 
     capture = load_capture(input_path, sample=sample, split=split, variant=variant)
     try:
-        path = write_gttnet_json(capture, out_path, units=units, overwrite=overwrite)
+        path = write_gttnet_json(capture, out_path, units=units, overwrite=overwrite, limb_format=limb_format)
     except FileExistsError as exc:
         raise click.ClickException(str(exc)) from None
     summary = {

@@ -36,7 +36,7 @@ def resolve_units(path: object, layout: str, given: str | None, recorded: str | 
         UserWarning: Neither is known, so metres are assumed (one line naming the file and the way out).
     """
     for what, unit in (("--units", given), ("the file's units", recorded)):
-        if unit is not None and unit not in UNITS:
+        if unit is not None and (not isinstance(unit, str) or unit not in UNITS):
             raise ValueError(f"{path}: {what}: expected one of {', '.join(UNITS)}, found {unit!r}")
     if recorded is not None:
         if given is not None and given != recorded:
