@@ -27,7 +27,13 @@ import numpy as np
 
 from gttdata.recording import Recording, RecordingSpec
 
-__all__ = ["project_with_distortion", "reprojection_errors", "render_result"]
+__all__ = [
+    "is_recording_result",
+    "project_with_distortion",
+    "render_capture_result",
+    "render_result",
+    "reprojection_errors",
+]
 
 log = logging.getLogger(__name__)
 
@@ -168,11 +174,22 @@ def _timing_plot(path: Path, cam_id, frame, time_s, names, timed: bool) -> Path:
     return _save(fig, path)
 
 
-def _animation(path: Path, points, order, skeleton, fps: float, max_frames: int) -> Path | None:
+def _animation(
+    path: Path, points, order, skeleton, fps: float, max_frames: int | None, progress: bool = False
+) -> Path | None:
+    """The 3-D skeleton in ``order``; every row, or every k-th row to stay within ``max_frames`` (said so)."""
+    from tqdm import tqdm
+
     from gttdata.errors import PreviewDependencyError, RendererUnavailableError
     from gttdata.preview.render import orbit_camera, render_view
 
-    take = order[:: max(1, int(np.ceil(len(order) / max_frames)))]
+    step = 1 if not max_frames else max(1, int(np.ceil(len(order) / max_frames)))
+    take = order[::step]
+    if step > 1:
+        log.warning(
+            "%s: %d rows drawn as %d frames (every %d-th row, --max-frames %d): the animation plays %dx "
+            "faster than the capture", path.name, len(order), len(take), step, max_frames, step,
+        )  # fmt: skip
     size = (480, 480)
     try:
         K, T = orbit_camera(points[np.isfinite(points).all(-1)], image_size=size)
@@ -182,7 +199,8 @@ def _animation(path: Path, points, order, skeleton, fps: float, max_frames: int)
         return None
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (size[0], size[1]))
     try:
-        for k, n in enumerate(take):
+        bar = tqdm(take, desc=path.name, unit="frame", disable=not progress, leave=False)
+        for k, n in enumerate(bar):
             rgb = first if k == 0 else render_view(points[n], skeleton, K, T, size)
             writer.write(np.ascontiguousarray(rgb[..., ::-1]))
     finally:
@@ -198,7 +216,8 @@ def render_result(
     video_fps: float | None = None,
     width_px: int = 640,
     animation: bool = True,
-    max_3d_frames: int = 300,
+    max_3d_frames: int | None = None,
+    progress: bool = False,
 ) -> dict[str, Path]:
     """Write the result views (see the module docstring) into ``out``.
 
@@ -209,7 +228,9 @@ def render_result(
         video_fps: Playback rate of the per-camera videos (default: the camera's rate, else 30).
         width_px: Width of the per-camera videos, pixels (each zooms onto the subject).
         animation: Also render the 3-D animation.
-        max_3d_frames: At most this many frames in the 3-D animation (rows are subsampled).
+        max_3d_frames: At most this many frames in the 3-D animation (rows are subsampled, with a
+            warning); None: every row.
+        progress: Progress bars on stderr.
 
     Returns:
         The files written, by kind.
@@ -265,9 +286,119 @@ def render_result(
     written["timing"] = _timing_plot(out / "timing.png", cam_id, frame, time_s, names, timed)
     if animation:
         rate = float(np.nansum(rec.fps)) if np.isfinite(rec.fps).any() else 30.0
-        anim = _animation(out / "skeleton_3d.mp4", X, order, rec.skeleton, min(rate, 30.0), max_3d_frames)
+        anim = _animation(
+            out / "skeleton_3d.mp4", X, order, rec.skeleton, min(rate, 30.0), max_3d_frames, progress
+        )
         if anim is not None:
             written["skeleton_3d"] = anim
     finite = err[np.isfinite(err)]
     log.info("reprojection error: mean %.2f px, median %.2f px", finite.mean(), np.median(finite))
+    return written
+
+
+def is_recording_result(result: str | Path) -> bool:
+    """Whether a ``gttnet reconstruct`` result was made from a recording (it stores the recording)."""
+    import h5py
+
+    try:
+        with h5py.File(result, "r") as f:
+            return bool(f.attrs.get("recording"))
+    except OSError as exc:
+        raise ValueError(f"{result}: expected a .h5 result of `gttnet reconstruct`, found {exc}") from exc
+
+
+def render_capture_result(
+    result: str | Path,
+    out: str | Path,
+    *,
+    source: str | Path | None = None,
+    sample: int = 0,
+    units: str | None = None,
+    fps: float = 30.0,
+    animation: bool = True,
+    max_3d_frames: int | None = None,
+    progress: bool = False,
+) -> dict[str, Path]:
+    """Views of a result made from a capture file (GTT-Net JSON, DLOE ``.mat``, a shard), not a recording.
+
+    Such a file holds viewing rays, not camera videos, so there are no overlay videos. Written into ``out``:
+    ``reprojection_error.csv`` (each image's joints projected through its own camera pose, against the
+    file's observations: mean and median pixels per camera and joint), ``skeleton_3d.mp4`` (every image in
+    the result's recovered order) and ``timing.png`` (each camera's images on the recovered rank axis).
+
+    Args:
+        result: ``.h5`` result of ``gttnet reconstruct`` on a capture file.
+        out: Output folder (created).
+        source: The input file (default: the ``source`` the result records, relative to the working
+            folder, else to the result's folder).
+        sample: Sample index, for a shard or dataset source.
+        units: Length unit of a source that records none (as given to ``reconstruct``).
+        fps: Playback rate of the 3-D animation, frames per second.
+        animation: Also render the 3-D animation.
+        max_3d_frames: At most this many animation frames (rows subsampled, with a warning); None: all.
+        progress: Progress bars on stderr.
+
+    Returns:
+        The files written, by kind.
+
+    Raises:
+        ValueError: The result or its source cannot be read, or they disagree (one line).
+    """
+    import h5py
+
+    from gttnet.io import load_input
+
+    result, out = Path(result), Path(out)
+    with h5py.File(result, "r") as f:
+        if "points3d" not in f or "image_index" not in f:
+            raise ValueError(
+                f"{result}: field 'points3d' or 'image_index' is missing; expected a reconstruct result"
+            )
+        X, index = f["points3d"][()], f["image_index"][()]
+        rank = f["order"][()] if "order" in f else np.arange(X.shape[0])
+        stored = f.attrs.get("source", "")
+    stored = stored.decode() if isinstance(stored, bytes) else str(stored)
+    src = Path(source) if source is not None else Path(stored)
+    if source is None and not src.exists() and (result.parent / stored).exists():
+        src = result.parent / stored
+    if not str(src) or not src.exists():
+        raise ValueError(f"{result}: its source {str(src)!r} was not found; pass the input file (--input)")
+    loaded = load_input(src, sequencing="partial", sample=sample, units=units)
+    obs = loaded.observations
+    row_of = {int(k): i for i, k in enumerate(loaded.image_index)}
+    if X.shape[1] != obs.keypoints_px.shape[1] or any(int(k) not in row_of for k in index):
+        raise ValueError(
+            f"{result}: its {X.shape[0]} images of {X.shape[1]} joints do not match {src} "
+            f"({obs.keypoints_px.shape[0]} images of {obs.keypoints_px.shape[1]} joints)"
+        )
+    rows = np.array([row_of[int(k)] for k in index], dtype=np.int64)
+    K, T = obs.K[rows], obs.cam_from_world[rows]
+    cam = obs.cam_id[rows]
+    Xc = np.einsum("nab,njb->nja", T[:, :3, :3], X) + T[:, None, :3, 3]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = np.einsum("nab,njb->nja", K, Xc)
+        proj = h[..., :2] / h[..., 2:3]
+    det = np.where(obs.visible[rows][..., None], obs.keypoints_px[rows], np.nan)
+    err = np.linalg.norm(proj - det, axis=-1)
+    out.mkdir(parents=True, exist_ok=True)
+    names = [f"cam_{v}" for v in range(int(cam.max()) + 1)]
+    table = out / "reprojection_error.csv"
+    with open(table, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["camera", "joint", "n", "mean_px", "median_px"])
+        for v, name in enumerate(names):
+            e = err[cam == v]
+            for jj, jn in enumerate(obs.skeleton.joint_names):
+                col = e[:, jj][np.isfinite(e[:, jj])]
+                mean, med = (f"{col.mean():.3f}", f"{np.median(col):.3f}") if col.size else ("", "")
+                w.writerow([name, jn, col.size, mean, med])
+    written: dict[str, Path] = {"reprojection_error": table}
+    order = np.argsort(rank, kind="stable")
+    written["timing"] = _timing_plot(
+        out / "timing.png", cam, np.arange(len(cam)), rank.astype(float), names, False
+    )
+    if animation:
+        anim = _animation(out / "skeleton_3d.mp4", X, order, obs.skeleton, fps, max_3d_frames, progress)
+        if anim is not None:
+            written["skeleton_3d"] = anim
     return written

@@ -50,6 +50,29 @@ __all__ = ["register", "render_cmd"]
 )
 @click.option("--no-3d", "no_3d", is_flag=True, help="Skip the 3-D animation (pyrender).")
 @click.option(
+    "--max-frames",
+    type=click.IntRange(min=1),
+    default=None,
+    help="At most this many 3-D animation frames (rows subsampled, with a warning) [default: every row].",
+)
+@click.option(
+    "--input",
+    "input_path",
+    type=click.Path(exists=True, dir_okay=True),
+    default=None,
+    help="Capture file of a result made from one (.json, .mat, shard) [default: the source it records].",
+)
+@click.option(
+    "--sample", type=click.IntRange(min=0), default=0, show_default=True, help="Sample of a shard input."
+)
+@click.option(
+    "--units",
+    type=click.Choice(["m", "mm", "cm", "inch"]),
+    default=None,
+    help="Length unit of a capture file that records none, as given to reconstruct.",
+)
+@click.option("--quiet", is_flag=True, help="No progress bars.")
+@click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object: files written and reprojection error."
 )
 @click.argument("extra_keypoints", nargs=-1, type=click.Path())
@@ -65,6 +88,11 @@ def render_cmd(
     video_fps,
     width_px,
     no_3d,
+    max_frames,
+    input_path,
+    sample,
+    units,
+    quiet,
     as_json,
     extra_keypoints,
 ):
@@ -75,16 +103,25 @@ def render_cmd(
     a per-camera timing plot.
 
     RESULT is a .h5 written by `gttnet reconstruct` from a recording; the recording is reloaded from
-    what the result stores unless --project or --calibration/--keypoints say otherwise.
+    what the result stores unless --project or --calibration/--keypoints say otherwise. A result made from
+    a capture file (GTT-Net JSON, .mat, a shard) gets the 3-D animation, the timing plot and the
+    reprojection table (a capture file holds rays, not videos); its input is the source it records, or
+    --input. The animation draws every image unless --max-frames subsamples it (with a warning).
 
     \b
     Examples:
       gttnet render runs/recording/result.h5 --out runs/recording/render
       gttnet render runs/recording/result.h5 --project runs/recording/project.toml --no-3d --json
+      gttnet render result.h5 --input capture.json --out result_render
     """
     from gttdata.recording import load_project
-    from gttnet.apps.render import render_result
+    from gttnet.apps.render import is_recording_result, render_capture_result, render_result
     from gttnet.io.recording_input import spec_from_options
+
+    try:
+        from_recording = project is not None or calibration is not None or is_recording_result(result)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
 
     spec = None
     if project is not None:
@@ -101,13 +138,33 @@ def render_cmd(
     from gttnet.cli.reconstruct import _WarningLines
 
     warn = _WarningLines(logging.WARNING)
-    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttnet.apps.render")]
+    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttnet.apps.render", "gttnet.io")]
     for lg in loggers:
         lg.addHandler(warn)
     try:
-        written = render_result(
-            result, out, spec=spec, video_fps=video_fps, width_px=width_px, animation=not no_3d
-        )
+        if from_recording:
+            written = render_result(
+                result,
+                out,
+                spec=spec,
+                video_fps=video_fps,
+                width_px=width_px,
+                animation=not no_3d,
+                max_3d_frames=max_frames,
+                progress=not quiet,
+            )
+        else:
+            written = render_capture_result(
+                result,
+                out,
+                source=input_path,
+                sample=sample,
+                units=units,
+                fps=video_fps or 30.0,
+                animation=not no_3d,
+                max_3d_frames=max_frames,
+                progress=not quiet,
+            )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     finally:

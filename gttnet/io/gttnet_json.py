@@ -53,7 +53,7 @@ def _array(path: Path, d: dict, key: str, ndim: int) -> np.ndarray:
 def _ndim(value: object) -> int:
     """Dimensions of a JSON value read as an array; -1 for a ragged one."""
     try:
-        return int(np.ndim(value))
+        return int(np.ndim(value))  # type: ignore[arg-type]
     except ValueError:
         return -1
 

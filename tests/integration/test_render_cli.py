@@ -62,15 +62,91 @@ def test_render_writes_videos_and_errors(scene_factory, tmp_path):
     assert len(rows) == 3 * 5 and all(float(r["mean_px"]) >= 0 for r in rows if r["mean_px"])
 
 
-def test_render_needs_a_recording_result(tmp_path, scene_factory):
+def test_render_of_a_capture_result_reprojects_through_each_image(tmp_path, scene_factory):
+    """A result made from a shard (no recording) gets the reprojection table and the timing plot."""
     from gttdata.shards.writer import ShardWriter
+    from gttnet.io import load_input
 
     with ShardWriter(tmp_path / "s", split="test") as w:
-        w.write(scene_factory(n_cameras=3, n_joints=5, frames_per_camera=4))
+        w.write(scene_factory(n_cameras=3, n_joints=5, frames_per_camera=4, sigma_px=2.0))
     shard = sorted((tmp_path / "s").glob("*.h5"))[0]
+    result = tmp_path / "r.h5"
+    res = CliRunner().invoke(main, ["reconstruct", str(shard), "--method", "hpf", "--out", str(result)])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "render"
+    res = CliRunner().invoke(main, ["render", str(result), "--out", str(out), "--no-3d", "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout.strip().splitlines()[-1])
+    assert set(summary["files"]) == {"reprojection_error.csv", "timing.png"}
+    # Independently: each row's joints through its own image's K and pose, against that image's pixels.
+    arrays, _ = read_reconstruction(result)
+    obs = load_input(shard, sequencing="partial").observations
+    view_row = {int(k): i for i, k in enumerate(load_input(shard, sequencing="partial").image_index)}
+    errs = []
+    for n, k in enumerate(arrays["image_index"]):
+        i = view_row[int(k)]
+        Xc = arrays["points3d"][n] @ obs.cam_from_world[i, :3, :3].T + obs.cam_from_world[i, :3, 3]
+        h = Xc @ obs.K[i].T
+        e = np.linalg.norm(h[:, :2] / h[:, 2:] - obs.keypoints_px[i], axis=-1)
+        errs.append(e[obs.visible[i]])
+    expected = float(np.concatenate(errs).mean())
+    assert expected > 0.1  # hpf smooths: the projections leave the noisy detections
+    assert summary["reprojection_mean_px"] == pytest.approx(expected, abs=2e-3)
+
+
+def test_render_of_a_capture_result_names_a_missing_or_mismatched_input(tmp_path):
+    from gttnet.io.gttnet_json import write_gttnet_json
+    from tests.gttnet.test_authors_json import _sample
+
+    cap = write_gttnet_json(_sample("coco17"), tmp_path / "cap.json")
+    result = tmp_path / "r.h5"
     res = CliRunner().invoke(
-        main, ["reconstruct", str(shard), "--method", "pseudo", "--out", str(tmp_path / "r.h5")]
+        main, ["reconstruct", str(cap), "--method", "pseudo", "--sequencing", "none", "--out", str(result)]
     )
     assert res.exit_code == 0, res.output
-    res = CliRunner().invoke(main, ["render", str(tmp_path / "r.h5")])
-    assert res.exit_code == 1 and "field 'recording' is missing" in res.output
+    moved = tmp_path / "elsewhere.json"
+    cap.rename(moved)
+    res = CliRunner().invoke(main, ["render", str(result), "--no-3d", "--out", str(tmp_path / "a")])
+    assert res.exit_code == 1 and "was not found; pass the input file (--input)" in res.output
+    assert "Traceback" not in res.output
+    res = CliRunner().invoke(
+        main, ["render", str(result), "--no-3d", "--input", str(moved), "--out", str(tmp_path / "b")]
+    )
+    assert res.exit_code == 0, res.output
+    other = write_gttnet_json(_sample("quadruped36"), tmp_path / "other.json")
+    res = CliRunner().invoke(
+        main, ["render", str(result), "--no-3d", "--input", str(other), "--out", str(tmp_path / "c")]
+    )
+    assert res.exit_code == 1 and "do not match" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_animation_draws_every_row_unless_told_and_says_when_it_subsamples(tmp_path, caplog):
+    from gttdata.errors import RendererUnavailableError
+    from gttnet.apps import render as render_mod
+
+    calls = []
+
+    def fake_render_view(points, skeleton, K, T, size, **kw):  # stands in for pyrender: counts frames
+        calls.append(1)
+        return np.zeros((size[1], size[0], 3), np.uint8)
+
+    import gttdata.preview.render as pr
+
+    orig = pr.render_view
+    pr.render_view = fake_render_view
+    try:
+        from tests.gttnet.test_authors_json import _sample
+
+        sample = _sample("coco17")
+        X = sample.points3d
+        order = np.arange(X.shape[0])
+        render_mod._animation(tmp_path / "a.mp4", X, order, sample.skeleton, 10.0, None)
+        assert len(calls) == X.shape[0]  # every row: no silent 300-frame cap
+        calls.clear()
+        with caplog.at_level("WARNING"):
+            render_mod._animation(tmp_path / "b.mp4", X, order, sample.skeleton, 10.0, 5)
+        assert len(calls) <= 5 and "faster than the capture" in caplog.text
+    except RendererUnavailableError:
+        pytest.skip("no OpenGL")
+    finally:
+        pr.render_view = orig
