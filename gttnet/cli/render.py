@@ -71,7 +71,7 @@ __all__ = ["register", "render_cmd"]
     default=None,
     help="Length unit of a capture file that records none, as given to reconstruct.",
 )
-@click.option("--quiet", is_flag=True, help="No progress bars.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object: files written and reprojection error."
 )
@@ -92,7 +92,7 @@ def render_cmd(
     input_path,
     sample,
     units,
-    quiet,
+    progress,
     as_json,
     extra_keypoints,
 ):
@@ -151,7 +151,7 @@ def render_cmd(
                 width_px=width_px,
                 animation=not no_3d,
                 max_3d_frames=max_frames,
-                progress=not quiet,
+                progress=progress,
             )
         else:
             written = render_capture_result(
@@ -163,7 +163,7 @@ def render_cmd(
                 fps=video_fps or 30.0,
                 animation=not no_3d,
                 max_3d_frames=max_frames,
-                progress=not quiet,
+                progress=progress,
             )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
