@@ -72,6 +72,7 @@ __all__ = ["register", "render_cmd"]
     help="Length unit of a capture file that records none, as given to reconstruct.",
 )
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the summary (implies --no-progress).")
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object: files written and reprojection error."
 )
@@ -93,6 +94,7 @@ def render_cmd(
     sample,
     units,
     progress,
+    quiet,
     as_json,
     extra_keypoints,
 ):
@@ -151,7 +153,7 @@ def render_cmd(
                 width_px=width_px,
                 animation=not no_3d,
                 max_3d_frames=max_frames,
-                progress=progress,
+                progress=progress and not quiet,
             )
         else:
             written = render_capture_result(
@@ -163,7 +165,7 @@ def render_cmd(
                 fps=video_fps or 30.0,
                 animation=not no_3d,
                 max_3d_frames=max_frames,
-                progress=progress,
+                progress=progress and not quiet,
             )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
