@@ -291,6 +291,14 @@ def _capture_params(
         outlier_sigma_px=float(c.outlier_sigma_px.draw(rng)),
         joint_drop_rate=float(c.joint_drop_rate.draw(rng)),
         image_drop_rate=float(c.image_drop_rate.draw(rng)),
+        # Drawn after the older fields (constants draw nothing), so older recipes keep their samples.
+        camera_motion=c.camera_motion,
+        ptz_lag_s=float(c.ptz_lag_s.draw(rng)),
+        ptz_aim_deg=float(c.ptz_aim_deg.draw(rng)),
+        ptz_subject_px=float(c.ptz_subject_px.draw(rng)),
+        noise_corr_s=float(c.noise_corr_s.draw(rng)),
+        swap_rate=float(c.swap_rate.draw(rng)),
+        miss_run_frames=float(c.miss_run_frames.draw(rng)),
     )
 
 

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from gttdata.cameras import CameraRig
+from gttdata.capture import realism
 from gttdata.capture.noise import add_detection_noise
 from gttdata.capture.occlusion import drop_images, drop_joints, visible_in_camera
 from gttdata.capture.sample import CaptureSample, temporal_affinity
@@ -41,6 +42,13 @@ class CaptureParams:
         outlier_sigma_px: Std of an outlier's displacement, pixels.
         joint_drop_rate: Probability that a joint is dropped at random.
         image_drop_rate: Probability that a whole image is dropped.
+        camera_motion: ``"fixed"`` or ``"ptz"`` (cameras pan and tilt after the subject; a pose per image).
+        ptz_lag_s: Operator lag of a ``ptz`` camera, seconds.
+        ptz_aim_deg: Std of a ``ptz`` camera's aiming error, degrees.
+        ptz_subject_px: Zoom of a ``ptz`` camera (subject height, pixels; 0: fixed focal length).
+        noise_corr_s: Correlation time of the detection noise along each camera's stream, seconds.
+        swap_rate: Probability per image of a left/right swap of every mirrored joint pair.
+        miss_run_frames: Mean length of the runs of missed joints, frames (<= 1: independent drops).
     """
 
     fps_hz: tuple[float, ...]
@@ -55,10 +63,23 @@ class CaptureParams:
     outlier_sigma_px: float = 50.0
     joint_drop_rate: float = 0.0
     image_drop_rate: float = 0.0
+    camera_motion: str = "fixed"
+    ptz_lag_s: float = 0.3
+    ptz_aim_deg: float = 1.0
+    ptz_subject_px: float = 0.0
+    noise_corr_s: float = 0.0
+    swap_rate: float = 0.0
+    miss_run_frames: float = 0.0
 
     def to_dict(self) -> dict:
-        """JSON-serialisable form (lists for tuples)."""
+        """JSON-serialisable form (lists for tuples); the realism fields only where they are switched on."""
         d = asdict(self)
+        if self.camera_motion == "fixed":
+            for k in ("camera_motion", "ptz_lag_s", "ptz_aim_deg", "ptz_subject_px"):
+                d.pop(k)
+        for k in ("noise_corr_s", "swap_rate", "miss_run_frames"):
+            if d[k] == 0.0:
+                d.pop(k)
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
 
@@ -199,6 +220,18 @@ def _simulate(
         points[sel] = motion.sample_at(t[sel] - start)
     K = rig.K[cam]
     T = rig.cam_from_world[cam]
+    if params.camera_motion == "ptz":
+        T, K = realism.pan_tilt_zoom_poses(
+            T,
+            K,
+            cam,
+            t,
+            points,
+            rng,
+            lag_s=params.ptz_lag_s,
+            aim_deg=params.ptz_aim_deg,
+            subject_px=params.ptz_subject_px,
+        )
     size = np.array([c.image_size for c in rig.cameras], dtype=np.int32)
     gt_px, depth = project_images(points, K, T)
     lens = [list(c.dist) for c in rig.cameras]
@@ -214,10 +247,20 @@ def _simulate(
         sigma_px=params.sigma_px,
         outlier_rate=params.outlier_rate,
         outlier_sigma_px=params.outlier_sigma_px,
+        correlate=(
+            (lambda e: realism.correlate_along_streams(e, cam, t, corr_s=params.noise_corr_s))
+            if params.noise_corr_s > 0
+            else None
+        ),
     )
-    visible = visible_in_camera(gt_px, depth, size[cam]) & drop_joints(
-        (n, sk.n_joints), rng, rate=params.joint_drop_rate
-    )
+    noisy, swapped = realism.swap_left_right(noisy, sk.mirror, rng, rate=params.swap_rate)
+    if params.miss_run_frames > 1:
+        kept = realism.missed_runs(
+            cam, t, sk.n_joints, rng, rate=params.joint_drop_rate, mean_run=params.miss_run_frames
+        )
+    else:
+        kept = drop_joints((n, sk.n_joints), rng, rate=params.joint_drop_rate)
+    visible = visible_in_camera(gt_px, depth, size[cam]) & kept
     nbr, w = _event_affinity(t, cam, points, event, len(segments))
     meta = {
         "capture": params.to_dict(),
@@ -226,6 +269,8 @@ def _simulate(
         "n_outliers": int((outlier & visible).sum()),
         "missing_rate": float(1.0 - visible.mean()) if visible.size else 0.0,
     }
+    if params.swap_rate > 0:
+        meta["n_swapped_images"] = int(swapped.sum())
     if params.image_drop_rate > 0:
         # What a camera's own timestamps reveal (frame k at k / fps on its clock): dropped frames as gaps,
         # where the stream index (the video's frame index) runs on without them.

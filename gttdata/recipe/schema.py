@@ -208,6 +208,17 @@ class CaptureSpec:
         joint_drop_rate: Fraction of joints dropped at random (on top of out-of-image / behind-camera).
         image_drop_rate: Fraction of whole images dropped.
         recenter: Translate the motion window so its mean root position is above the world origin.
+        camera_motion: ``fixed`` cameras, or ``ptz``: each camera stays in place but pans and tilts after
+            the subject, one pose per image, as broadcast footage
+            (:func:`gttdata.capture.realism.pan_tilt_zoom_poses`).
+        ptz_lag_s: Operator lag of a ``ptz`` camera, seconds.
+        ptz_aim_deg: Std of a ``ptz`` camera's drifting aiming error, degrees.
+        ptz_subject_px: Zoom of a ``ptz`` camera: the subject's height in pixels (0: fixed focal length).
+        noise_corr_s: Correlation time of the detection noise along each camera's stream, seconds (0:
+            independent per image).
+        swap_rate: Probability per image that a detector swaps every left/right joint pair.
+        miss_run_frames: Mean length, in frames, of the runs in which a joint is missed (0 or 1: joints
+            are dropped independently); the fraction missed stays ``joint_drop_rate``.
     """
 
     window_s: Param = _p(2.5, gt=0, le=MAX_WINDOW_S)
@@ -224,6 +235,14 @@ class CaptureSpec:
     joint_drop_rate: Param = _p(0.0, ge=0, lt=1)  # 1 would leave nothing to reconstruct
     image_drop_rate: Param = _p(0.0, ge=0, lt=1)
     recenter: bool = True
+    # Off at their defaults and left out of the recipe's hash there, so older recipes keep their hash.
+    camera_motion: str = _f("fixed", choices=("fixed", "ptz"), omit_default=True)
+    ptz_lag_s: Param = _p(0.3, ge=0, le=10, omit_default=True)
+    ptz_aim_deg: Param = _p(1.0, ge=0, le=30, omit_default=True)
+    ptz_subject_px: Param = _p(0.0, ge=0, le=10000, omit_default=True)
+    noise_corr_s: Param = _p(0.0, ge=0, le=60, omit_default=True)
+    swap_rate: Param = _p(0.0, ge=0, le=1, omit_default=True)
+    miss_run_frames: Param = _p(0.0, ge=0, le=10000, omit_default=True)
 
 
 @dataclass(frozen=True)
