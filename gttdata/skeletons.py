@@ -55,7 +55,7 @@ __all__ = [
 ]
 
 #: Body-plan families, in the order the docs list them.
-FAMILIES: tuple[str, ...] = ("human", "hand", "quadruped", "markers")
+FAMILIES: tuple[str, ...] = ("human", "hand", "quadruped", "primate", "markers")
 
 
 def _tree(name: str, joints: tuple[str, ...], edges: dict[str, str | None], extra=(), mirror=()) -> Skeleton:
@@ -215,6 +215,29 @@ def quadruped36() -> Skeleton:
             e[f"{s}_{names[0]}"] = base
             e |= {f"{s}_{c}": f"{s}_{p}" for p, c in zip(names[:-1], names[1:], strict=True)}
     return _tree("quadruped36", QUADRUPED36_JOINTS, e)
+
+
+MONKEY13_JOINTS: tuple[str, ...] = (
+    "nose", "head", "neck", "right_shoulder", "right_hand", "left_shoulder", "left_hand",
+    "hip", "right_knee", "right_foot", "left_knee", "left_foot", "tail",
+)  # fmt: skip
+
+
+def monkey13() -> Skeleton:
+    """A monkey as markerless primate studios annotate it (OpenMonkeyStudio-style), 13 joints, rooted at the nose.
+
+    Head ``nose`` -> ``head`` -> ``neck``; from the neck each ``shoulder`` -> ``hand`` (no elbow) and the
+    ``hip``; from the hip each ``knee`` -> ``foot`` and the ``tail`` (its tip).
+    """
+    e: dict[str, str | None] = {"nose": None, "head": "nose", "neck": "head", "hip": "neck", "tail": "hip"}
+    for s in ("left", "right"):
+        e |= {
+            f"{s}_shoulder": "neck",
+            f"{s}_hand": f"{s}_shoulder",
+            f"{s}_knee": "hip",
+            f"{s}_foot": f"{s}_knee",
+        }
+    return _tree("monkey13", MONKEY13_JOINTS, e)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -523,4 +546,7 @@ register_skeleton(
     "quadruped",
     quadruped36,
     "procedural quadruped (gttdata.mocap.procedural.generate_quadruped_motion)",
+)
+register_skeleton(
+    "monkey13", "primate", monkey13, "procedural monkey (gttdata.mocap.procedural.generate_monkey_motion)"
 )

@@ -292,3 +292,38 @@ def test_generation_is_fast():
     t0 = time.perf_counter()
     generate_motion("mixed", seed=1)
     assert time.perf_counter() - t0 < 1.0  # typically ~0.03 s; loose for loaded CI machines
+
+
+@pytest.mark.parametrize("kind", ["walk", "climb", "sit"])
+def test_monkey_motions_are_deterministic_above_the_floor_and_on_their_topology(kind):
+    from gttdata.mocap.procedural import generate_monkey_motion, generate_skeleton_motion
+    from gttdata.skeletons import skeleton_family
+
+    m = generate_monkey_motion(kind, seed=4, duration_s=3.0, fps_hz=60.0)
+    again = generate_skeleton_motion("monkey13", kind, seed=4, duration_s=3.0, fps_hz=60.0)
+    np.testing.assert_array_equal(m.positions, again.positions)
+    assert m.skeleton.name == "monkey13" and skeleton_family("monkey13") == "primate"
+    assert m.positions.shape == (181, 13, 3) and np.isfinite(m.positions).all()
+    assert m.positions[..., 2].min() >= -1e-9
+    # Rigid segments (all but shoulder -> hand, which has no elbow) keep their lengths.
+    sk = m.skeleton
+    arms = {sk.index("left_hand"), sk.index("right_hand")}
+    bl = m.bone_lengths()
+    rigid = [k for k, (c, _) in enumerate(sk.bones) if c not in arms]
+    assert bl[:, rigid].std(axis=0).max() < 0.03
+    hip, neck = sk.index("hip"), sk.index("neck")
+    trunk = np.linalg.norm(m.positions[:, neck] - m.positions[:, hip], axis=-1).mean()
+    assert 0.15 < trunk < 0.5  # macaque-sized
+
+
+def test_a_climbing_monkey_goes_up_and_a_walking_one_stays_low():
+    from gttdata.mocap.procedural import generate_monkey_motion
+
+    climb = generate_monkey_motion("climb", seed=2, duration_s=4.0, fps_hz=30.0)
+    walk = generate_monkey_motion("walk", seed=2, duration_s=4.0, fps_hz=30.0)
+    hip = climb.skeleton.index("hip")
+    assert climb.positions[-1, hip, 2] - climb.positions[0, hip, 2] > 0.5
+    assert walk.positions[..., 2].max() < 0.8
+    neck = climb.skeleton.index("neck")
+    up = climb.positions[:, neck] - climb.positions[:, hip]
+    assert np.mean(up[:, 2] / np.linalg.norm(up, axis=-1)) > 0.8  # body axis points up the wall

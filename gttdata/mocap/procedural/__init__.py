@@ -19,15 +19,18 @@ from gttdata.mocap.procedural._gait import gait_track
 from gttdata.mocap.procedural._ground import place_on_ground
 from gttdata.mocap.procedural._hand import HAND_KINDS, generate_hand_motion
 from gttdata.mocap.procedural._mixed import mixed_track
+from gttdata.mocap.procedural._monkey import MONKEY_KINDS, generate_monkey_motion
 from gttdata.mocap.procedural._quadruped import QUADRUPED_KINDS, generate_quadruped_motion
 from gttdata.mocap.procedural._track import Track
 from gttdata.skeleton import cmu31
 
 __all__ = [
     "HAND_KINDS",
+    "MONKEY_KINDS",
     "PROCEDURAL_KINDS",
     "QUADRUPED_KINDS",
     "generate_hand_motion",
+    "generate_monkey_motion",
     "generate_motion",
     "generate_quadruped_motion",
     "generate_skeleton_motion",
@@ -211,14 +214,15 @@ def kinds_for_skeleton(skeleton: str) -> tuple[str, ...]:
     """Procedural motion kinds available on a registered topology (empty when none).
 
     Human topologies (CMU-31 and the keypoint sets derived from it) take :data:`PROCEDURAL_KINDS`,
-    ``hand21`` takes :data:`HAND_KINDS` and ``quadruped36`` :data:`QUADRUPED_KINDS`.
+    ``hand21`` takes :data:`HAND_KINDS`, ``quadruped36`` :data:`QUADRUPED_KINDS` and ``monkey13``
+    :data:`MONKEY_KINDS`.
     """
     from gttdata.skeletons import derivable_from_cmu31, get_skeleton
 
     name = get_skeleton(skeleton).name
     if name in derivable_from_cmu31():
         return PROCEDURAL_KINDS
-    return {"hand21": HAND_KINDS, "quadruped36": QUADRUPED_KINDS}.get(name, ())
+    return {"hand21": HAND_KINDS, "quadruped36": QUADRUPED_KINDS, "monkey13": MONKEY_KINDS}.get(name, ())
 
 
 def generate_skeleton_motion(
@@ -252,5 +256,7 @@ def generate_skeleton_motion(
         return generate_hand_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
     if name == "quadruped36":
         return generate_quadruped_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
+    if name == "monkey13":
+        return generate_monkey_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
     motion = generate_motion(kind, seed=seed, duration_s=duration_s, fps_hz=fps_hz)
     return motion if name == "cmu31" else derive_from_cmu31(motion, name)
