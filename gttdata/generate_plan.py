@@ -273,6 +273,13 @@ def _build_rig(recipe: GenerateRecipe, rng: np.random.Generator) -> tuple[Camera
     }
 
 
+def _camera_motion(ptz_prob: float, rng: np.random.Generator) -> str:
+    """``"ptz"`` with probability ``ptz_prob``, else ``"fixed"``; draws nothing when the answer is certain."""
+    if ptz_prob <= 0.0:
+        return "fixed"
+    return "ptz" if ptz_prob >= 1.0 or rng.random() < ptz_prob else "fixed"
+
+
 def _capture_params(
     recipe: GenerateRecipe, n_cameras: int, window_s: float, rng: np.random.Generator
 ) -> CaptureParams:
@@ -292,7 +299,7 @@ def _capture_params(
         joint_drop_rate=float(c.joint_drop_rate.draw(rng)),
         image_drop_rate=float(c.image_drop_rate.draw(rng)),
         # Drawn after the older fields (constants draw nothing), so older recipes keep their samples.
-        camera_motion=c.camera_motion,
+        camera_motion=_camera_motion(float(c.ptz_prob.draw(rng)), rng),
         ptz_lag_s=float(c.ptz_lag_s.draw(rng)),
         ptz_aim_deg=float(c.ptz_aim_deg.draw(rng)),
         ptz_subject_px=float(c.ptz_subject_px.draw(rng)),

@@ -208,9 +208,9 @@ class CaptureSpec:
         joint_drop_rate: Fraction of joints dropped at random (on top of out-of-image / behind-camera).
         image_drop_rate: Fraction of whole images dropped.
         recenter: Translate the motion window so its mean root position is above the world origin.
-        camera_motion: ``fixed`` cameras, or ``ptz``: each camera stays in place but pans and tilts after
-            the subject, one pose per image, as broadcast footage
-            (:func:`gttdata.capture.realism.pan_tilt_zoom_poses`).
+        ptz_prob: Probability that a sample's cameras are pan-tilt-zoom cameras: each stays in place but
+            pans and tilts after the subject, one pose per image, as in broadcast footage
+            (:func:`gttdata.capture.realism.pan_tilt_zoom_poses`); otherwise they are fixed.
         ptz_lag_s: Operator lag of a ``ptz`` camera, seconds.
         ptz_aim_deg: Std of a ``ptz`` camera's drifting aiming error, degrees.
         ptz_subject_px: Zoom of a ``ptz`` camera: the subject's height in pixels (0: fixed focal length).
@@ -236,7 +236,7 @@ class CaptureSpec:
     image_drop_rate: Param = _p(0.0, ge=0, lt=1)
     recenter: bool = True
     # Off at their defaults and left out of the recipe's hash there, so older recipes keep their hash.
-    camera_motion: str = _f("fixed", choices=("fixed", "ptz"), omit_default=True)
+    ptz_prob: Param = _p(0.0, ge=0, le=1, omit_default=True)
     ptz_lag_s: Param = _p(0.3, ge=0, le=10, omit_default=True)
     ptz_aim_deg: Param = _p(1.0, ge=0, le=30, omit_default=True)
     ptz_subject_px: Param = _p(0.0, ge=0, le=10000, omit_default=True)

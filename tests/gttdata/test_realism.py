@@ -25,14 +25,14 @@ def _sample(**capture):
 def test_realism_fields_leave_older_recipes_and_samples_unchanged():
     plain = _recipe()
     d = recipe_to_dict(plain)
-    for key in ("camera_motion", "ptz_lag_s", "swap_rate", "noise_corr_s", "miss_run_frames"):
+    for key in ("ptz_prob", "ptz_lag_s", "swap_rate", "noise_corr_s", "miss_run_frames"):
         assert key not in d["capture"]  # not in the plain form at its default: the hash is unchanged
     assert recipe_hash(plain) != recipe_hash(_recipe(swap_rate=0.1))
     assert "swap_rate" not in _sample().meta["capture"]
 
 
 def test_ptz_cameras_stay_in_place_and_turn_after_the_subject():
-    fixed, ptz = _sample(), _sample(camera_motion="ptz", ptz_lag_s=0.0, ptz_aim_deg=0.0)
+    fixed, ptz = _sample(), _sample(ptz_prob=1.0, ptz_lag_s=0.0, ptz_aim_deg=0.0)
     np.testing.assert_allclose(ptz.points3d, fixed.points3d)
 
     def centres(s):
@@ -50,7 +50,7 @@ def test_ptz_cameras_stay_in_place_and_turn_after_the_subject():
 
 
 def test_ptz_zoom_keeps_the_subject_at_the_asked_height():
-    s = _sample(camera_motion="ptz", ptz_lag_s=0.0, ptz_aim_deg=0.0, ptz_subject_px=120.0, sigma_px=0.0)
+    s = _sample(ptz_prob=1.0, ptz_lag_s=0.0, ptz_aim_deg=0.0, ptz_subject_px=120.0, sigma_px=0.0)
     px = s.keypoints_gt_px
     centre = px.mean(axis=1, keepdims=True)
     extent = 2.0 * np.linalg.norm(px - centre, axis=-1).max(axis=1)
@@ -112,7 +112,14 @@ def test_missed_joints_come_in_runs_at_the_asked_rate():
     assert run_len > 2.5 * ind_len
 
 
-def test_unknown_camera_motion_is_one_line():
-    with pytest.raises(RecipeError, match="camera_motion") as exc:
-        _recipe(camera_motion="dolly")
+def test_out_of_range_ptz_probability_is_one_line():
+    with pytest.raises(RecipeError, match="ptz_prob") as exc:
+        _recipe(ptz_prob=1.5)
     assert "\n" not in str(exc.value)
+
+
+def test_ptz_probability_mixes_fixed_and_following_cameras():
+    recipe = _recipe(ptz_prob=0.5)
+    kinds = {
+        build_sample(recipe, "train", i)[0].meta["capture"].get("camera_motion", "fixed") for i in range(4)
+    }
