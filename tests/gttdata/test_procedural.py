@@ -322,7 +322,8 @@ def test_a_climbing_monkey_goes_up_and_a_walking_one_stays_low():
     climb = generate_monkey_motion("climb", seed=2, duration_s=4.0, fps_hz=30.0)
     walk = generate_monkey_motion("walk", seed=2, duration_s=4.0, fps_hz=30.0)
     hip = climb.skeleton.index("hip")
-    assert climb.positions[-1, hip, 2] - climb.positions[0, hip, 2] > 0.5
+    rise = climb.positions[-1, hip, 2] - climb.positions[0, hip, 2]
+    assert 0.1 < rise and climb.positions[..., 2].max() < 2.5  # it climbs, and stays in a cage's height
     assert walk.positions[..., 2].max() < 0.8
     neck = climb.skeleton.index("neck")
     up = climb.positions[:, neck] - climb.positions[:, hip]

@@ -7,7 +7,7 @@ has, resized to a macaque (0.45-0.6 m from hip to neck) with their own limb prop
 * ``walk``: quadrupedal locomotion, from the procedural quadruped's walk or turn (shoulder -> front paw
   becomes shoulder -> hand, with the elbow dropped; hip -> knee -> hind paw becomes hip -> knee -> foot);
 * ``climb``: the same gait on a vertical surface: the body is turned so that its forward axis points up,
-  and it climbs;
+  and it climbs (a fifth of the gait's distance, so that it stays within a cage's height);
 * ``sit``: sitting upright and reaching, from the procedural human's idle and gesture motions (CMU-31),
   scaled down, with the hip lowered to the floor and a tail lying behind.
 
@@ -85,6 +85,10 @@ def _quadrupedal(
         Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
         Ry = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # +x (forward) -> +z (up)
         pos = pos @ (Ry @ Rz).T
+        # Cage walls are a few metres high: keep a fifth of the climb, so that the animal stays in view
+        # for the whole motion (a per-frame translation: every segment keeps its length).
+        hip = pos[:, monkey13().index("hip"), 2]
+        pos[..., 2] -= 0.8 * (hip - hip[0])[:, None]
         pos[..., 2] -= pos[..., 2].min() - 0.2
     return pos
 
