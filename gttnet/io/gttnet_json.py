@@ -425,8 +425,6 @@ def read_gttnet_json(path: str | Path, *, units: str | None = None) -> ImportedC
     C = _array(path, d, "C", 2)
     if C.shape != (3, n):
         raise ImportFormatError(f"{path}: field 'C': expected shape (3, N) = {(3, n)}, found {C.shape}")
-    if not np.all(np.isfinite(C)):
-        raise ImportFormatError(f"{path}: field 'C': expected finite camera centres, found NaN or inf")
     cam_raw = _camera_ids(path, d, n, C)
     ids, cam = np.unique(cam_raw, return_inverse=True)
     cam = cam.ravel()

@@ -120,6 +120,6 @@ def test_out_of_range_ptz_probability_is_one_line():
 
 def test_ptz_probability_mixes_fixed_and_following_cameras():
     recipe = _recipe(ptz_prob=0.5)
-    kinds = {
-        build_sample(recipe, "train", i)[0].meta["capture"].get("camera_motion", "fixed") for i in range(4)
-    }
+    picks = [("train", i) for i in range(4)] + [("val", 0), ("val", 1), ("test", 0), ("test", 1)]
+    kinds = [build_sample(recipe, sp, i)[0].meta["capture"].get("camera_motion", "fixed") for sp, i in picks]
+    assert set(kinds) == {"ptz", "fixed"}, kinds
