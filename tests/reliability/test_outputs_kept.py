@@ -8,7 +8,6 @@ from click.testing import CliRunner
 
 from tests.reliability.conftest import TINY, one_line_error
 
-
 # --- D10: a full disk while the training item cache is written ----------------------------------------
 
 
