@@ -81,3 +81,69 @@ def test_split_names_with_dots_inside_still_pass():
 
     recipe = load_recipe(TINY, ["splits.0.name=v1.2-a_b"])
     assert recipe.splits[0].name == "v1.2-a_b"
+
+
+# --- D4: export --overwrite deletes only an earlier export ---------------------------------------------
+
+
+def _export(source, out, *extra):
+    from gttdata.cli import main
+
+    return CliRunner().invoke(main, ["export", str(source), "--split", "test", "--out", str(out), *extra])
+
+
+def _tree(root):
+    return sorted((str(p.relative_to(root)), p.stat().st_size) for p in root.rglob("*") if p.is_file())
+
+
+@pytest.mark.parametrize("where", ["itself", "parent"])
+def test_export_overwrite_never_deletes_the_dataset(tmp_path, tiny_data, where):
+    """``--out`` equal to, or holding, the dataset being exported: one line, every shard kept."""
+    import shutil
+
+    data = tmp_path / "box" / "data"
+    shutil.copytree(tiny_data, data)
+    before = _tree(data)
+    out = data if where == "itself" else data.parent
+    line = one_line_error(_export(data, out, "--overwrite"))
+    assert "data being exported" in line and str(out) in line
+    assert _tree(data) == before
+
+
+def test_export_overwrite_refuses_a_folder_that_is_not_an_export(tmp_path, tiny_data):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("do not lose me")
+    (out / "project.toml").write_text('source = "my own project"\ncameras = []\n')
+    line = one_line_error(_export(tiny_data, out, "--overwrite"))
+    assert "earlier gttdata export" in line and "nothing deleted" in line
+    assert (out / "notes.txt").read_text() == "do not lose me"
+    assert (out / "project.toml").read_text().startswith('source = "my own project"')
+
+
+def test_export_overwrite_replaces_only_what_the_export_wrote(tmp_path, tiny_data):
+    out = tmp_path / "rec"
+    assert _export(tiny_data, out).exit_code == 0
+    assert (out / "cam_0").is_dir()
+    (out / "notes.txt").write_text("mine")
+    (out / "cam_0" / "README").write_text("mine too")
+    res = _export(tiny_data, out, "--overwrite", "--format", "dlc")
+    assert res.exit_code == 0, res.output
+    assert (out / "notes.txt").read_text() == "mine" and (out / "cam_0" / "README").read_text() == "mine too"
+    assert not list((out / "cam_0").glob("*_keypoints.json"))  # the earlier OpenPose files went
+    assert (out / "cam_0.csv").is_file() and (out / "project.toml").is_file()
+
+
+def test_export_refuses_project_names_outside_the_folder(tmp_path, tiny_data):
+    out = tmp_path / "rec"
+    assert _export(tiny_data, out).exit_code == 0
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep")
+    text = (
+        (out / "project.toml")
+        .read_text()
+        .replace('timestamps = "cam_0_timestamps.csv"', 'timestamps = "../victim.txt"')
+    )
+    (out / "project.toml").write_text(text)
+    line = one_line_error(_export(tiny_data, out, "--overwrite"))
+    assert "../victim.txt" in line and victim.read_text() == "keep"
