@@ -318,3 +318,68 @@ def test_dlc_h5_that_is_not_hdf5_is_one_line(tmp_path):
     with pytest.raises(KeypointFormatError) as err:
         read_dlc(tmp_path / "cam.h5")
     _one_line(err.value, "cam.h5")
+
+
+# --- D12: cached motion files are checked before use ---------------------------------------------------
+
+
+def test_damaged_cached_motion_is_refused_before_generate(tmp_path):
+    """A ``cache:`` motion whose SHA-256 is not the published one: one line, nothing generated."""
+    from gttdata.cli import main
+    from gttdata.generate_plan import _expand
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    for name in ("01_01.bvh", "01_03.bvh"):
+        (cache / name).write_text("HIERARCHY\nROOT Hips\n")  # not the CMU clip
+    _expand.cache_clear()
+    res = CliRunner().invoke(
+        main,
+        ["generate", "recipes/gttdata/cmu.yaml", "--out", str(tmp_path / "out"), "--no-progress"],
+        env={"GTT_CACHE": str(cache)},
+    )
+    _expand.cache_clear()
+    line = one_line_error(res)
+    assert "01_01.bvh" in line and "sha256" in line and "gttdata motions fetch" in line
+    assert not (tmp_path / "out" / "manifest.json").exists()
+
+
+def test_cached_motion_check_passes_the_published_bytes(tmp_path, monkeypatch):
+    import hashlib
+
+    from gttdata.errors import GttDataError
+    from gttdata.mocap import fetch
+
+    path = tmp_path / "01_01.bvh"
+    path.write_bytes(b"the published clip")
+    entry = fetch.MotionFile("01_01.bvh", "pkg", "x", hashlib.sha256(b"the published clip").hexdigest())
+    monkeypatch.setattr(fetch, "MOTION_FILES", (entry,))
+    fetch.check_cached(path, tmp_path)  # intact: used
+    fetch.check_cached(tmp_path / "other.bvh", tmp_path)  # no published checksum: not checked here
+    path.write_bytes(b"the published clap")
+    with pytest.raises(GttDataError) as err:
+        fetch.check_cached(path, tmp_path)
+    _one_line(err.value, "01_01.bvh")
+
+
+# --- D15: manifest shard paths stay inside the dataset -------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "bad",
+    ["../outside.h5", "/etc/passwd", "test/../../x.h5", "./test/shard-00000.h5", "test//a.h5", "", ".."],
+)
+def test_manifest_shard_path_outside_the_dataset_is_refused(tmp_path, tiny_data, bad):
+    import json
+    import shutil
+
+    from gttdata.cli import main
+
+    data = tmp_path / "data"
+    shutil.copytree(tiny_data, data)
+    manifest = json.loads((data / "manifest.json").read_text())
+    manifest["shards"][0]["path"] = bad
+    (data / "manifest.json").write_text(json.dumps(manifest))
+    for cmd in (["verify", str(data)], ["inspect", str(data)]):
+        line = one_line_error(CliRunner().invoke(main, cmd))
+        assert "manifest.json" in line and "shards[0].path" in line and repr(bad) in line, line
