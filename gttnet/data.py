@@ -422,6 +422,7 @@ class SequenceDataset(torch.utils.data.Dataset):
         self.indices = list(range(len(source))) if indices is None else list(indices)
         self._cache: dict[tuple[int, str, str], TrainItem] = {}
         self._disk_full = False
+        self._refused = 0
 
     def _write_cache(self, item: TrainItem, path: Path) -> None:
         """Cache ``item`` at ``path``; a failed write (full disk) warns once and stops disk caching.
@@ -465,7 +466,11 @@ class SequenceDataset(torch.utils.data.Dataset):
                 try:
                     return load_item(path)  # weights only: a planted file never runs code
                 except ValueError as exc:  # a damaged or foreign cache entry is rebuilt, never trusted
-                    log.warning("%s; rebuilding the cached item", exc)
+                    self._refused += 1
+                    if self._refused == 1:  # a cache of an older gttnet would repeat it for every item
+                        log.warning("%s; rebuilding it (and any other such item, silently)", exc)
+                    else:
+                        log.debug("%s; rebuilding it", exc)
         obs, gt = self.source.view(index, sequencing, variant)
         item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
         if path is not None and not self._disk_full:

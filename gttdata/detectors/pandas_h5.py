@@ -107,7 +107,7 @@ def _numeric(ds, where: str) -> np.ndarray:
         raise KeypointFormatError(f"{where}: expected an HDF5 dataset, found {type(ds).__name__}")
     if ds.dtype.kind not in "fiub" or h5py.check_vlen_dtype(ds.dtype) is not None:
         raise KeypointFormatError(
-            f"{where}: expected numbers, found {_kind_name(ds)} (object columns are pickles; refused)"
+            f"{where}: expected numbers, found {_kind_name(ds)}; refused without unpickling (files are data, never code)"
         )
     return ds[()]
 
@@ -115,7 +115,7 @@ def _numeric(ds, where: str) -> np.ndarray:
 def _kind_name(ds) -> str:
     pseudo = _attr(ds, "PSEUDOATOM")
     if pseudo is not None:
-        return f"a {_text(pseudo)} column"
+        return f"pickled {_text(pseudo)} values"
     return f"dtype {ds.dtype}"
 
 

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
 
 from gttdata.errors import KeypointFormatError
 from gttnet.errors import ModelError
@@ -383,3 +385,40 @@ def test_manifest_shard_path_outside_the_dataset_is_refused(tmp_path, tiny_data,
     for cmd in (["verify", str(data)], ["inspect", str(data)]):
         line = one_line_error(CliRunner().invoke(main, cmd))
         assert "manifest.json" in line and "shards[0].path" in line and repr(bad) in line, line
+
+
+@given(st.lists(st.sampled_from(["a", "b.h5", ".", "..", "", "/", "\\", "x..y"]), min_size=1, max_size=6))
+def test_any_accepted_shard_path_stays_inside(parts):
+    """Property: whatever a manifest says, a path the check lets through joins to a file under the root."""
+    import posixpath
+
+    from gttdata.errors import ManifestError
+    from gttdata.manifest import _check_shard_path
+
+    path = "/".join(parts)
+    try:
+        _check_shard_path("m.json", 0, path)
+    except ManifestError as exc:
+        assert "\n" not in str(exc)
+        return
+    joined = posixpath.normpath(posixpath.join("/root/data", path))
+    assert joined.startswith("/root/data/") and joined == "/root/data/" + path
+
+
+_plain = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=8) | st.floats(allow_nan=False),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.tuples(inner, inner) | st.dictionaries(st.text(max_size=4), inner)
+    ),
+    max_leaves=12,
+)
+
+
+@given(_plain, st.integers(0, 5))
+def test_plain_unpickle_reads_builtin_data_and_nothing_else(value, protocol):
+    """Property: builtin data round-trips under every protocol; the same data holding any global is refused."""
+    from gttdata.detectors.pandas_h5 import plain_unpickle
+
+    assert plain_unpickle(pickle.dumps(value, protocol=protocol), where="a") == value
+    with pytest.raises(KeypointFormatError, match="refused without running it"):
+        plain_unpickle(pickle.dumps([value, pathlib.PurePosixPath("x")], protocol=protocol), where="a")
