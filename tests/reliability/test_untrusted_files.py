@@ -344,6 +344,8 @@ def test_damaged_cached_motion_is_refused_before_generate(tmp_path):
     line = one_line_error(res)
     assert "01_01.bvh" in line and "sha256" in line and "gttdata motions fetch" in line
     assert not (tmp_path / "out" / "manifest.json").exists()
+    shown = CliRunner().invoke(main, ["motions", "show", "01_01.bvh"], env={"GTT_CACHE": str(cache)})
+    assert "warning: " in shown.output and "sha256" in shown.output  # shown, never passed off as the clip
 
 
 def test_cached_motion_check_passes_the_published_bytes(tmp_path, monkeypatch):
