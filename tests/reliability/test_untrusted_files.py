@@ -293,9 +293,8 @@ def test_dlc_h5_with_a_pickled_object_column_is_refused(tmp_path):
 
 def test_dlc_h5_with_a_pickled_attribute_global_is_refused(tmp_path):
     """Table layout: PyTables unpickles attributes; a forged ``non_index_axes`` must not run."""
+    pd = pytest.importorskip("pandas")
     pytest.importorskip("tables")
-    import pandas as pd
-
     from gttdata.detectors.dlc import read_dlc
 
     path = tmp_path / "cam.h5"
