@@ -37,7 +37,7 @@ import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
 
-from gttnet.data import ShardSource, open_source, prepare_item
+from gttnet.data import ShardSource, load_item, open_source, prepare_item, save_item
 from gttnet.model.continuous_conv import ContinuousConv
 from gttnet.model.inputs import random_rotation
 from gttnet.model.network import build_model
@@ -84,9 +84,9 @@ def _time_items(source, shards, k: int, n: int) -> list[tuple[str, list[float]]]
                 prepare_item(*shards.view(i, seq, "orig"), k=k)
                 rows[1][1].append(time.perf_counter() - t0)
             path = Path(tmp) / f"{i}.pt"
-            torch.save(item, path)
+            save_item(item, path)  # the disk cache's own writer and weights-only reader
             t0 = time.perf_counter()
-            torch.load(path, weights_only=False)
+            load_item(path)
             rows[-1][1].append(time.perf_counter() - t0)
     return rows
 

@@ -16,12 +16,19 @@ joint's actual pixel error ``e``: ``0.35 + 0.6 exp(-e^2 / (2 s^2))`` with ``s = 
 plus uniform jitter of +-0.03, clipped to ``[0.15, 0.99]`` (every observed joint stays above the
 default missing threshold 0.1, so a reconstruction of the export sees the same joints as one of the
 shard).
+
+``overwrite`` replaces only an earlier export, and only the files an export writes: ``out`` must hold a
+``project.toml`` whose ``source`` says ``gttdata export of ...``, and the files removed are those the
+project file names (calibration, ground truth, each camera's detections and timestamps) plus
+``project.toml`` itself. Anything else in ``out`` stays. ``out`` may never be, hold or sit inside the
+data being exported (``protect``).
 """
 
 from __future__ import annotations
 
 import os
-import shutil
+import tomllib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +39,7 @@ from gttdata.calibration import save_calibration
 from gttdata.cameras import Camera, CameraRig
 from gttdata.capture.sample import CaptureSample
 from gttdata.detectors import Keypoints2D, write_keypoints
-from gttdata.errors import GttDataError
+from gttdata.errors import GttDataError, OutputError
 
 __all__ = ["EXPORT_FORMATS", "camera_rig_of", "export_capture", "realistic_confidence"]
 
@@ -82,6 +89,72 @@ def _write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+_EXPORT_SOURCE = "gttdata export of "
+_FIXED_FILES = ("calibration.toml", "ground_truth.npz")
+
+
+def _check_apart(out: Path, protect: Sequence[str | Path]) -> None:
+    """Refuse an ``out`` that is, holds or sits inside a protected path (the data being exported)."""
+    o = out.resolve()
+    for p in protect:
+        q = Path(p).resolve()
+        if o == q or o in q.parents or q in o.parents:
+            how = "is" if o == q else ("holds" if o in q.parents else "sits inside")
+            raise OutputError(
+                f"{out}: --out {how} the data being exported ({p}); choose a folder apart from it"
+            )
+
+
+def _plain_name(out: Path, name: object) -> str:
+    if not isinstance(name, str) or not name or "/" in name or "\\" in name or name in (".", ".."):
+        raise OutputError(
+            f"{out / 'project.toml'}: expected file names inside the export, found {name!r}; "
+            "refusing to delete anything"
+        )
+    return name
+
+
+def _remove_previous_export(out: Path) -> None:
+    """Remove what an earlier ``gttdata export`` wrote in ``out``, and nothing else.
+
+    Raises:
+        OutputError: ``out`` holds no earlier export (no ``project.toml`` naming ``gttdata export``).
+    """
+    project = out / "project.toml"
+    try:
+        data = tomllib.loads(project.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        data = None
+    source = data.get("source") if isinstance(data, dict) else None
+    cameras = data.get("cameras") if isinstance(data, dict) else None
+    if not (isinstance(source, str) and source.startswith(_EXPORT_SOURCE) and isinstance(cameras, list)):
+        found = "no project.toml" if not project.is_file() else f"a project.toml with source {source!r}"
+        raise OutputError(
+            f"{out}: --overwrite replaces only an earlier gttdata export (project.toml with source "
+            f"'{_EXPORT_SOURCE}...'), found {found}; nothing deleted, choose an empty or new --out"
+        )
+    names = list(_FIXED_FILES)
+    for cam in cameras:
+        if not isinstance(cam, dict):
+            raise OutputError(f"{project}: cameras: expected tables, found {cam!r}; nothing deleted")
+        names += [_plain_name(out, cam.get(k)) for k in ("keypoints", "timestamps") if k in cam]
+    try:
+        for name in names:
+            p = out / name
+            if p.is_dir() and not p.is_symlink():  # OpenPose: one JSON file per frame, written by us
+                for f in p.glob("*_keypoints.json"):
+                    f.unlink()
+                if not any(p.iterdir()):
+                    p.rmdir()
+            else:
+                p.unlink(missing_ok=True)
+        project.unlink()
+    except OSError as exc:
+        from gttdata.fileio import write_error
+
+        raise write_error(out, exc) from exc
+
+
 def export_capture(
     sample: CaptureSample,
     out: str | Path,
@@ -92,6 +165,7 @@ def export_capture(
     seed: int = 0,
     dlc_suffix: str = ".csv",
     overwrite: bool = False,
+    protect: Sequence[str | Path] = (),
 ) -> Path:
     """Write ``sample`` as detector files plus calibration, timestamps and a project file.
 
@@ -104,21 +178,26 @@ def export_capture(
             camera's own clock.
         seed: Seed of the confidence jitter.
         dlc_suffix: ``.csv`` or ``.h5`` for DeepLabCut files.
-        overwrite: Replace an earlier export in ``out`` (else a non-empty ``out`` is an error).
+        overwrite: Replace an earlier export in ``out`` (else a non-empty ``out`` is an error): only
+            the files that export wrote are removed, and only when ``out`` holds one.
+        protect: Paths ``out`` must not equal, contain or sit inside (the dataset or shard exported).
 
     Returns:
         The project file path.
 
     Raises:
         GttDataError: ``out`` is not empty and ``overwrite`` is False.
+        OutputError: ``out`` overlaps a protected path, or ``overwrite`` finds something other than an
+            earlier export there (nothing is deleted).
     """
     if fmt not in EXPORT_FORMATS:
         raise ValueError(f"format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
     out = Path(out)
+    _check_apart(out, protect)
     if out.exists() and any(out.iterdir()):
         if not overwrite:
             raise GttDataError(f"{out}: output folder is not empty; pass --overwrite to replace its export")
-        shutil.rmtree(out)
+        _remove_previous_export(out)
     out.mkdir(parents=True, exist_ok=True)
     rig = camera_rig_of(sample)
     save_calibration(rig, out / "calibration.toml", units=units)

@@ -109,6 +109,14 @@ def _expand(pattern: str) -> tuple[str, ...]:
         raise RecipeError(
             f"expected existing motion files, found no file for {pattern!r} -> {resolved}{hint}"
         )
+    from gttdata.errors import GttDataError
+    from gttdata.mocap.fetch import check_cached
+
+    for hit in hits:  # a cached file with a published checksum is used only when it matches it
+        try:
+            check_cached(hit)
+        except GttDataError as exc:
+            raise RecipeError(str(exc)) from None
     return tuple(hits)
 
 

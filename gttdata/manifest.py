@@ -6,6 +6,7 @@ import functools
 import json
 import logging
 import os
+import posixpath
 import subprocess
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -62,6 +63,29 @@ class ShardEntry:
     n_samples: int
     bytes: int
     sha256: str
+
+
+def _check_shard_path(source: str, i: int, path: object) -> None:
+    """A shard path is relative, POSIX, normalised and stays inside the dataset (a manifest may come from anyone).
+
+    Raises:
+        ManifestError: ``../x``, ``/abs``, ``a/../b``, ``./a``, ``a//b``, backslashes, empty (one line).
+    """
+    ok = (
+        isinstance(path, str)
+        and path not in ("", ".")
+        and "\\" not in path
+        and "\0" not in path
+        and not posixpath.isabs(path)
+        and posixpath.normpath(path) == path
+        and path != ".."
+        and not path.startswith("../")
+    )
+    if not ok:
+        raise ManifestError(
+            f"{source}: shards[{i}].path: expected a relative path inside the dataset "
+            f"(like 'train/shard-00000.h5'), found {path!r}"
+        )
 
 
 @dataclass(frozen=True)
@@ -134,6 +158,8 @@ class Manifest:
             raise ManifestError(
                 f"{source}: shards: expected objects with {list(ShardEntry.__dataclass_fields__)} ({exc})"
             ) from exc
+        for i, entry in enumerate(shards):
+            _check_shard_path(source, i, entry.path)
         kw = {k: d[k] for k in names}
         kw["variants"] = tuple(kw["variants"])
         # JSON is written with sorted keys: restore the recipe's split order.

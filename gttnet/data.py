@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -27,7 +26,13 @@ __all__ = [
     "open_source",
     "ConcatSource",
     "check_registered",
+    "save_item",
+    "load_item",
+    "ITEM_FORMAT",
 ]
+
+#: Format tag of a cached item file (plain tensors and strings, read with ``weights_only=True``).
+ITEM_FORMAT = "gttnet-item/1"
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +72,85 @@ class TrainItem:
         """Structure, cameras and ground truth rotated together about the world origin (F^GR)."""
         R = R.to(self.points3d)
         return replace(self, inputs=self.inputs.rotated(R), points3d=self.points3d @ R.T)
+
+
+def _item_to_plain(item: TrainItem) -> dict:
+    plain: dict = {"format": ITEM_FORMAT}
+    plain["inputs"] = {f.name: getattr(item.inputs, f.name) for f in fields(item.inputs)}
+    plain.update({f.name: getattr(item, f.name) for f in fields(item) if f.name != "inputs"})
+    return plain
+
+
+def _item_from_plain(plain: object) -> TrainItem:
+    """Rebuild a :class:`TrainItem`; every field must have the type its dataclass declares."""
+    if not isinstance(plain, dict) or plain.get("format") != ITEM_FORMAT:
+        found = plain.get("format") if isinstance(plain, dict) else type(plain).__name__
+        raise ValueError(f"format: expected {ITEM_FORMAT!r}, found {found!r}")
+    raw_inputs = plain.get("inputs")
+    if not isinstance(raw_inputs, dict):
+        raise ValueError(f"inputs: expected a mapping, found {type(raw_inputs).__name__}")
+
+    def typed(owner, values: dict) -> dict:
+        out = {}
+        for f in fields(owner):
+            if f.name == "inputs":
+                continue
+            v = values.get(f.name)
+            if f.name in _ITEM_STR_FIELDS:
+                ok, want = isinstance(v, str), "a string"
+            else:
+                ok = isinstance(v, torch.Tensor) or (f.name == "chain" and v is None)
+                want = "a tensor"
+            if not ok:
+                raise ValueError(f"{f.name}: expected {want}, found {type(v).__name__}")
+            out[f.name] = v
+        return out
+
+    return TrainItem(
+        inputs=SequenceInput(**typed(SequenceInput, raw_inputs)),
+        **typed(TrainItem, plain),
+    )
+
+
+_ITEM_STR_FIELDS = ("sequencing", "domain", "name", "condition")
+
+
+def save_item(item: TrainItem, path: str | Path) -> Path:
+    """Write a training item as plain tensors and strings (no pickled classes), atomically.
+
+    Raises:
+        OutputError: One line naming the path when the write fails (full disk, read-only...).
+    """
+    import io
+
+    from gttdata.fileio import atomic_write
+
+    buf = io.BytesIO()
+    torch.save(_item_to_plain(item), buf)
+    with atomic_write(path, "wb") as fh:
+        fh.write(buf.getbuffer())
+    return Path(path)
+
+
+def load_item(path: str | Path) -> TrainItem:
+    """Read a file written by :func:`save_item` with ``torch.load(weights_only=True)``: never code.
+
+    Raises:
+        ValueError: The file is not a cached item in this layout (one line naming the file and why).
+    """
+    import pickle
+
+    try:
+        plain = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        first = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+        raise ValueError(f"{path}: not weights only, refused unread ({first[:120]})") from None
+    except Exception as exc:  # noqa: BLE001 - torch raises EOFError, RuntimeError... on damaged files
+        raise ValueError(f"{path}: unreadable ({exc.__class__.__name__})") from exc
+    try:
+        return _item_from_plain(plain)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
 
 
 def affinity_targets(gt_nbr: np.ndarray, gt_w: np.ndarray, nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -337,6 +421,28 @@ class SequenceDataset(torch.utils.data.Dataset):
         self.variants = list(variants)
         self.indices = list(range(len(source))) if indices is None else list(indices)
         self._cache: dict[tuple[int, str, str], TrainItem] = {}
+        self._disk_full = False
+        self._refused = 0
+
+    def _write_cache(self, item: TrainItem, path: Path) -> None:
+        """Cache ``item`` at ``path``; a failed write (full disk) warns once and stops disk caching.
+
+        The write is atomic (:func:`gttdata.fileio.atomic_write`): workers and ranks may race on the same
+        item, and a failed write leaves neither a partial item nor a temporary file behind.
+        """
+        from gttdata.errors import OutputError
+
+        try:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                from gttdata.fileio import write_error
+
+                raise write_error(path.parent, exc) from exc
+            save_item(item, path)
+        except OutputError as exc:
+            self._disk_full = True
+            log.warning("%s; training goes on without the disk cache of items", exc)
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -358,16 +464,17 @@ class SequenceDataset(torch.utils.data.Dataset):
             path = self.cache_dir / f"{index:06d}-{sequencing}{streams}-{variant}-k{self.k}.pt"
             if path.is_file():
                 try:
-                    return torch.load(path, weights_only=False)
-                except Exception:  # noqa: BLE001 - a damaged cache entry is rebuilt, never trusted
-                    log.warning("%s: unreadable cached item, rebuilding it", path)
+                    return load_item(path)  # weights only: a planted file never runs code
+                except ValueError as exc:  # a damaged or foreign cache entry is rebuilt, never trusted
+                    self._refused += 1
+                    if self._refused == 1:  # a cache of an older gttnet would repeat it for every item
+                        log.warning("%s; rebuilding it (and any other such item, silently)", exc)
+                    else:
+                        log.debug("%s; rebuilding it", exc)
         obs, gt = self.source.view(index, sequencing, variant)
         item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            torch.save(item, tmp)
-            os.replace(tmp, path)  # atomic: workers and ranks may race on the same item
+        if path is not None and not self._disk_full:
+            self._write_cache(item, path)
         elif self.cache == "memory":
             self._cache[ck] = item
         return item

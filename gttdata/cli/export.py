@@ -53,7 +53,11 @@ def _read_sample(source: Path, split: str, sample: int, variant: str):
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the confidence jitter.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="Output folder.")
-@click.option("--overwrite", is_flag=True, help="Replace an earlier export in --out.")
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace an earlier export in --out (only the files it wrote; never other data).",
+)
 @friendly_errors
 def export_cmd(source, split, sample, variant, fmt, units, shared_clock, seed, out, overwrite):
     """Write one simulated capture as a real recording would look.
@@ -71,7 +75,14 @@ def export_cmd(source, split, sample, variant, fmt, units, shared_clock, seed, o
 
     cap = _read_sample(source, split, sample, variant)
     project = export_capture(
-        cap, out, fmt=fmt, units=units, shared_clock=shared_clock, seed=seed, overwrite=overwrite
+        cap,
+        out,
+        fmt=fmt,
+        units=units,
+        shared_clock=shared_clock,
+        seed=seed,
+        overwrite=overwrite,
+        protect=[source],
     )
     click.echo(f"{cap.name}: {cap.n_cameras} cameras, {cap.n_images} images -> {project}")
 

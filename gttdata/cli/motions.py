@@ -144,11 +144,16 @@ def show_cmd(file: Path, fmt: str, scale: float | None) -> None:
       gttdata motions show 01_01.bvh
       gttdata motions show ~/.cache/gtt/motions/01_01.bvh
     """
+    from gttdata.errors import GttDataError
     from gttdata.mocap import format_for_path, load_motion
-    from gttdata.mocap.fetch import cache_dir
+    from gttdata.mocap.fetch import cache_dir, check_cached
 
     if not file.exists() and not file.is_absolute() and (cache_dir() / file).is_file():
         file = cache_dir() / file
+    try:
+        check_cached(file)  # shown either way (it is only read), but never passed off as the published clip
+    except GttDataError as exc:
+        click.echo(f"warning: {exc}", err=True)
     options = {}
     if scale is not None:
         if (format_for_path(file) if fmt == "auto" else fmt.lower()) != "bvh":

@@ -4,7 +4,10 @@ The CSV has three header rows (``scorer``, ``bodyparts``, ``coords`` with ``x, y
 body part), four for multi-animal projects (an ``individuals`` row after ``scorer``; the first
 individual is read), then one row per frame whose first cell is the frame number (or an image path,
 then rows are numbered in order). The ``.h5`` file is the same table stored by pandas under the key
-``df_with_missing``; reading and writing it needs pandas and PyTables (``pip install "gtt[formats]"``).
+``df_with_missing`` (``format="table"`` as DeepLabCut writes it, or ``"fixed"``). It is read with h5py
+alone (:mod:`gttdata.detectors.pandas_h5`), never with ``pandas.read_hdf``, which unpickles object
+columns and attributes: a keypoint file cannot run code. Writing ``.h5`` needs pandas and PyTables
+(``pip install "gtt[formats]"``).
 DeepLabCut predicts every body part in every frame: low ``likelihood`` marks the unreliable ones,
 NaN coordinates the absent ones.
 """
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gttdata.detectors import Keypoints2D
+from gttdata.detectors.pandas_h5 import read_pandas_frame
 from gttdata.errors import KeypointFormatError
 
 __all__ = ["SUMMARY", "read_dlc", "write_dlc"]
@@ -115,28 +119,35 @@ def _pandas():
 
 
 def _read_h5(path: Path) -> Keypoints2D:
-    pd = _pandas()
-    try:
-        df = pd.read_hdf(path)
-    except (ImportError, ValueError, KeyError, OSError, TypeError) as exc:
-        raise KeypointFormatError(f"{path}: not a DeepLabCut pandas table: {exc}") from exc
-    names = list(df.columns.names)
+    frame = read_pandas_frame(path, "df_with_missing" if _has_key(path, "df_with_missing") else None)
+    names = list(frame.names)
     if "bodyparts" not in names or "coords" not in names:
         raise KeypointFormatError(
             f"{path}: column levels must include 'bodyparts' and 'coords', found {names}"
         )
-    cols = df.columns
+    cols = frame.columns
+    keep = np.ones(len(cols), dtype=bool)
     if "individuals" in names:
-        first = cols.get_level_values("individuals")[0]
-        df = df.loc[:, cols.get_level_values("individuals") == first]
-        cols = df.columns
+        level = names.index("individuals")
+        keep = np.asarray([c[level] == cols[0][level] for c in cols]) if cols else keep
+    b, c = names.index("bodyparts"), names.index("coords")
     return _assemble(
         path,
-        [str(v) for v in cols.get_level_values("bodyparts")],
-        [str(v) for v in cols.get_level_values("coords")],
-        df.to_numpy(dtype=np.float64),
-        [str(v) for v in df.index],
+        [str(col[b]) for col, m in zip(cols, keep, strict=True) if m],
+        [str(col[c]) for col, m in zip(cols, keep, strict=True) if m],
+        frame.values[:, keep],
+        frame.index,
     )
+
+
+def _has_key(path: Path, key: str) -> bool:
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as fh:
+            return key in fh
+    except OSError:
+        return False  # read_pandas_frame names the file and the reason
 
 
 def read_dlc(path: Path) -> Keypoints2D:

@@ -32,6 +32,7 @@ __all__ = [
     "default_cache_dir",
     "fetch_motions",
     "list_cached",
+    "check_cached",
 ]
 
 _log = logging.getLogger(__name__)
@@ -139,6 +140,32 @@ def _cached_ok(path: Path, f: MotionFile) -> str | None:
         return None
     found = file_sha256(path)
     return None if found == f.sha256 else f"sha256 {found[:16]}..., expected {f.sha256[:16]}..."
+
+
+def check_cached(path: str | Path, cache: str | Path | None = None) -> None:
+    """Refuse a file of the motion cache whose SHA-256 is not the one :data:`MOTION_FILES` records.
+
+    Files outside the cache, and cache files of other names, are not checked here (a recipe's own
+    motion files carry no published checksum).
+
+    Raises:
+        GttDataError: One line naming the file, the expected and the found digest, and the fix.
+    """
+    path = Path(path)
+    cache = Path(cache) if cache is not None else cache_dir()
+    try:
+        inside = path.resolve().parent == cache.resolve()
+    except OSError:
+        return
+    known = next((f for f in MOTION_FILES if f.name == path.name and f.sha256), None) if inside else None
+    if known is None:
+        return
+    why = _cached_ok(path, known)
+    if why is not None:
+        raise GttDataError(
+            f"{path}: cached motion file {known.name}: {why} (damaged or replaced); "
+            "fetch it again with: gttdata motions fetch"
+        )
 
 
 def _run(cmd: list[str], cwd: Path, what: str) -> None:

@@ -148,7 +148,7 @@ def _convert_scalar(ctx: _Ctx, key: str, tp: type, v: object, meta: dict) -> obj
         elif not isinstance(v, str) or (meta.get("nonempty") and not v):
             raise ctx.fail(key, "a non-empty string" if meta.get("nonempty") else "a string", v)
         elif meta.get("pattern") and not re.match(meta["pattern"], v):
-            raise ctx.fail(key, "a name of letters, digits, '_', '.', '-'", v)
+            raise ctx.fail(key, "a name of letters, digits, '_', '.', '-' not starting with '.'", v)
         return v
     if tp is dict:
         if not (isinstance(v, dict) and all(isinstance(k, str) for k in v)):

@@ -127,6 +127,11 @@ class FileSource:
     skeleton: str = _f("native", omit_default=True)
 
 
+#: Split and dataset names: they become folder and file names, so never ``.``, ``..``, a hidden name, a
+#: path (``/``) or empty. ``\Z``, not ``$``: a trailing newline is refused too.
+NAME_PATTERN = r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z"
+
+
 @dataclass(frozen=True)
 class SplitSpec:
     """One dataset split; splits never share a motion.
@@ -137,7 +142,7 @@ class SplitSpec:
         sources: Where the split's motions come from.
     """
 
-    name: str = _f("train", pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str = _f("train", pattern=NAME_PATTERN)
     n_samples: int = _f(1, ge=0, le=MAX_SAMPLES_PER_SPLIT)
     sources: tuple[ProceduralSource | FileSource, ...] = _f((), nonempty=True)
 
@@ -322,7 +327,7 @@ class GenerateRecipe:
         augmentations: Capture-level variants stored next to each original sample.
     """
 
-    name: str = _f("gttdata", pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str = _f("gttdata", pattern=NAME_PATTERN)
     seed: int = _f(0, ge=0)
     output_dir: str = "data/gttdata"
     shard: ShardSpec = _f(None, factory=ShardSpec)

@@ -13,6 +13,13 @@ Two kinds of file, both written atomically (temporary file, fsync, rename):
 Every failure is one :class:`~gttnet.errors.ModelError` line naming the file, what was expected and
 what was found (an empty, truncated, bit-flipped or foreign file), never an unpickling traceback.
 
+**Files are data, never code.** Both kinds are read with ``torch.load(weights_only=True)``: only
+tensors, numbers, strings, lists, tuples and dicts come back, and a file that would need any other
+Python object (a pickled function call) is refused with one line naming the file and that object,
+before anything runs. The checksum proves a file is intact, not who wrote it. The one allowance is
+numpy's array reconstruction (plain arrays, no object is called) for checkpoints written before the
+NumPy generator state was stored as a tensor.
+
 Example::
 
     save_model("runs/a/model.pt", net, card={"steps": 100})  # writes model.pt and model.json
@@ -25,7 +32,9 @@ import hashlib
 import io
 import json
 import logging
+import pickle
 import re
+import warnings
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
@@ -47,7 +56,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 MODEL_FORMAT = "gttnet-model/1"
-CHECKPOINT_FORMAT = "gttnet-checkpoint/2"
+CHECKPOINT_FORMAT = "gttnet-checkpoint/3"  # 3: plain NumPy generator state
 _MAGIC = b"GTT-CHECKPOINT"
 _HEADER_RE = re.compile(rb"^GTT-CHECKPOINT sha256=([0-9a-f]{64}) bytes=(\d+)\n")
 
@@ -58,10 +67,47 @@ def _torch_bytes(payload: object) -> bytes:
     return buf.getvalue()
 
 
-def _unpickle(data: bytes, path: Path, what: str, *, weights_only: bool) -> object:
+_UNSAFE_RE = re.compile(r"Unsupported global: GLOBAL ([\w.<>]+)")
+
+
+def _legacy_numpy_globals() -> list:
+    """What numpy arrays of plain dtype need under ``weights_only`` (checkpoints before format 3).
+
+    ``_reconstruct`` only builds an empty ``ndarray`` whose bytes ``__setstate__`` then fills; no other
+    callable becomes reachable, so the allow-list stays weights-only.
+    """
+    import numpy as np
+
+    multiarray = getattr(np, "_core", None) or np.core  # numpy 2 / numpy 1
+    return [
+        multiarray.multiarray._reconstruct,
+        np.ndarray,
+        np.dtype,
+        *(type(np.dtype(t)) for t in ("u4", "i8", "f8")),
+    ]
+
+
+def _unpickle(data: bytes, path: Path, what: str, *, legacy_numpy: bool = False) -> object:
+    """``torch.load`` of ``data`` with ``weights_only=True``: tensors and plain containers, never code.
+
+    Raises:
+        ModelError: One line: a file that needs any other global (code) or that torch cannot read.
+    """
     try:
-        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=weights_only)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # torch's notes about pickle protocols
+            if legacy_numpy:
+                with torch.serialization.safe_globals(_legacy_numpy_globals()):
+                    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+            return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types (EOFError, UnpicklingError, RuntimeError...)
+        unsafe = _UNSAFE_RE.search(str(exc)) if isinstance(exc, pickle.UnpicklingError) else None
+        if unsafe is not None or (isinstance(exc, pickle.UnpicklingError) and "Unsupported" in str(exc)):
+            found = f"a pickled call to {unsafe.group(1)}" if unsafe else "pickled objects"
+            raise ModelError(
+                f"{path}: expected a {what} holding weights only (tensors, numbers, strings, lists, dicts), "
+                f"found {found}; refused without running it (files are data, never code)"
+            ) from None
         raise ModelError(
             f"{path}: expected a {what} (torch file), found {len(data)} bytes it cannot read "
             f"({exc.__class__.__name__})"
@@ -109,7 +155,7 @@ def load_checked(path: str | Path, *, what: str = "checkpoint") -> dict:
     if not raw:
         raise ModelError(f"{path}: expected a {what}, found an empty file (0 bytes)")
     if not raw.startswith(_MAGIC):
-        old = _unpickle(raw, path, what, weights_only=False)
+        old = _unpickle(raw, path, what, legacy_numpy=True)
         if not isinstance(old, dict):
             raise ModelError(f"{path}: expected a {what} (a mapping), found {type(old).__name__}")
         log.warning("%s: %s has no checksum (written by an older gttnet); loaded unverified", path, what)
@@ -130,7 +176,7 @@ def load_checked(path: str | Path, *, what: str = "checkpoint") -> dict:
         raise ModelError(
             f"{path}: sha256: expected {m.group(1).decode()[:16]}..., found {digest[:16]}... (the file is corrupt)"
         )
-    payload = _unpickle(data, path, what, weights_only=False)
+    payload = _unpickle(data, path, what, legacy_numpy=True)
     if not isinstance(payload, dict):
         raise ModelError(f"{path}: expected a {what} (a mapping), found {type(payload).__name__}")
     return payload
@@ -243,7 +289,7 @@ def read_model_file(path: str | Path) -> dict:
         cfg, state = payload.get("model_config"), payload.get("model")
     else:
         _check_card(path)
-        loaded = _unpickle(_read(path), path, "GTT-Net model", weights_only=True)
+        loaded = _unpickle(_read(path), path, "GTT-Net model")
         if not isinstance(loaded, dict):
             raise ModelError(f"{path}: expected a GTT-Net model (a mapping), found {type(loaded).__name__}")
         payload = loaded

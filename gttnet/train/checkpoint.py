@@ -50,10 +50,22 @@ class LoopState:
 
 
 def rng_states() -> dict:
-    """States of the python, numpy, torch and (when present) CUDA generators."""
+    """States of the python, numpy, torch and (when present) CUDA generators, as plain types.
+
+    Everything is a tensor, number, string, tuple or dict, so a checkpoint loads with
+    ``torch.load(weights_only=True)``: the NumPy Mersenne-Twister key (624 ``uint32``) is stored as an
+    int64 tensor, never as a pickled ``ndarray``.
+    """
+    name, key, pos, has_gauss, cached = np.random.get_state()  # noqa: NPY002 (global state)
     out = {
         "python": random.getstate(),
-        "numpy": np.random.get_state(),  # noqa: NPY002 (global state, saved for completeness)
+        "numpy": {
+            "bit_generator": str(name),
+            "key": torch.from_numpy(np.asarray(key, dtype=np.int64)),
+            "pos": int(pos),
+            "has_gauss": int(has_gauss),
+            "cached_gaussian": float(cached),
+        },
         "torch": torch.get_rng_state(),
     }
     if torch.cuda.is_available():
@@ -61,10 +73,25 @@ def rng_states() -> dict:
     return out
 
 
+def _numpy_state(saved: object) -> tuple:
+    """The ``np.random.set_state`` tuple of a saved NumPy state (plain dict, or the tuple of format 2)."""
+    if isinstance(saved, dict):
+        key = saved["key"]
+        key = key.numpy() if isinstance(key, torch.Tensor) else np.asarray(key)
+        return (
+            str(saved["bit_generator"]),
+            key.astype(np.uint32),
+            int(saved["pos"]),
+            int(saved["has_gauss"]),
+            float(saved["cached_gaussian"]),
+        )
+    return tuple(saved)  # type: ignore[arg-type]  # format 2: ('MT19937', ndarray, pos, has_gauss, cached)
+
+
 def set_rng_states(states: dict) -> None:
-    """Restore generator states saved by :func:`rng_states`."""
+    """Restore generator states saved by :func:`rng_states` (or by format-2 checkpoints)."""
     random.setstate(states["python"])
-    np.random.set_state(states["numpy"])  # noqa: NPY002
+    np.random.set_state(_numpy_state(states["numpy"]))  # noqa: NPY002
     torch.set_rng_state(states["torch"])
     if "cuda" in states and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(states["cuda"])
@@ -106,11 +133,12 @@ def save_checkpoint(
 def load_checkpoint(run_dir: str | Path) -> dict:
     """Read ``run_dir/checkpoint.pt`` (CPU tensors) with ``state`` as a :class:`LoopState`.
 
-    The file's SHA-256 header is checked first: a corrupt checkpoint never resumes.
+    The file's SHA-256 header is checked first: a corrupt checkpoint never resumes. It is read weights
+    only (:func:`gttnet.model.files.load_checked`): a checkpoint that would run code is refused.
 
     Raises:
         FileNotFoundError: If the run directory has no checkpoint.
-        ModelError: An empty, truncated, bit-flipped or unreadable checkpoint (one line).
+        ModelError: An empty, truncated, bit-flipped, unreadable or code-carrying checkpoint (one line).
     """
     path = Path(run_dir) / CHECKPOINT_NAME
     if not path.is_file():
@@ -120,4 +148,10 @@ def load_checkpoint(run_dir: str | Path) -> dict:
         payload["state"] = LoopState(**payload["state"])
     except (KeyError, TypeError) as exc:
         raise ModelError(f"{path}: expected a training checkpoint with a loop state, found {exc}") from exc
+    try:
+        _numpy_state(payload["rng"]["numpy"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ModelError(
+            f"{path}: rng.numpy: expected the NumPy generator state, found {exc.__class__.__name__}: {exc}"
+        ) from exc
     return payload
