@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from gttdata.capture.views import GroundTruth, Observations, make_view
+from gttnet.errors import GttNetError
 from gttnet.model.inputs import SequenceInput, prepare_inputs, prepare_stream_ordered_inputs
 
 __all__ = [
@@ -421,6 +422,7 @@ class SequenceDataset(torch.utils.data.Dataset):
         self.variants = list(variants)
         self.indices = list(range(len(source))) if indices is None else list(indices)
         self._cache: dict[tuple[int, str, str], TrainItem] = {}
+        self._skipped = 0  # captures skipped as unusable (a guard against skipping every one)
         self._disk_full = False
         self._refused = 0
 
@@ -472,7 +474,16 @@ class SequenceDataset(torch.utils.data.Dataset):
                     else:
                         log.debug("%s; rebuilding it", exc)
         obs, gt = self.source.view(index, sequencing, variant)
-        item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
+        try:
+            item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
+        except GttNetError as exc:
+            # A capture no solver can use (no joint seen by two cameras: far, occluded or two-camera
+            # recipes make a few): train on the next one, as a data loader would skip a bad file.
+            if self._skipped >= len(self):
+                raise
+            self._skipped += 1
+            log.warning("capture %d (%s) skipped: %s", index, sequencing, exc)
+            return self[((pos + 1) % len(self), salt, sequencing)]
         if path is not None and not self._disk_full:
             self._write_cache(item, path)
         elif self.cache == "memory":

@@ -429,3 +429,28 @@ def test_log_window_means_parts_missing_from_some_steps():
     # l_P exists only on batches with a named topology; a window mixing both must still log.
     window = [(3.0, {"affinity": 1.0, "pointnet": 0.5}), (1.0, {"affinity": 3.0})]
     assert window_means(window) == {"loss_affinity": 2.0, "loss_pointnet": 0.5}
+
+
+def test_an_unusable_capture_is_skipped_with_a_warning(tmp_path, caplog):
+    """A capture with no joint seen by two cameras stops no training run: the next capture is used."""
+    import dataclasses
+
+    spec = parse_train_recipe(_recipe(tmp_path)).data
+    src = open_source(spec, "train")
+
+    class OneCameraFirst:
+        def __len__(self):
+            return len(src)
+
+        def view(self, index, sequencing, variant):
+            obs, gt = src.view(index, sequencing, variant)
+            if index == 0:  # every image from camera 0: nothing can be triangulated
+                obs = dataclasses.replace(obs, cam_id=np.zeros_like(obs.cam_id))
+            return obs, gt
+
+    ds = SequenceDataset(OneCameraFirst(), k=6, sequencing={"full": 1.0}, cache="none")
+    ref = SequenceDataset(src, k=6, sequencing={"full": 1.0}, cache="none")
+    with caplog.at_level("WARNING"):
+        item = ds[(0, 0, None)]
+    assert "capture 0 (full) skipped" in caplog.text and "triangulable" in caplog.text
+    assert torch.equal(item.inputs.x_init, ref[(1, 0, None)].inputs.x_init)
