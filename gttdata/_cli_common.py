@@ -7,11 +7,13 @@ pick one sample of a stored capture (``--sample``/``--split``/``--variant``).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
+from click.core import ParameterSource
 
-__all__ = ["SPLIT_DEFAULT", "sample_options", "version_option"]
+__all__ = ["SPLIT_DEFAULT", "check_shard_split", "sample_options", "version_option"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -74,3 +76,37 @@ def sample_options(
         )(f)
 
     return decorate
+
+
+def check_shard_split(path: str | Path, split: str | None) -> None:
+    """Refuse a ``--split`` the user gave that contradicts the own split of a shard file ``path``.
+
+    A shard file holds one split, so ``--split`` cannot select anything in it; its default (``test``)
+    is ignored there, but a split typed on the command line that differs from the shard's is a
+    mistake worth one line rather than a silent read of another split. Not a shard file (a folder, a
+    recipe, another format, an unreadable file): nothing to check here, the command's reader reports.
+
+    Raises:
+        click.ClickException: ``--split`` given explicitly and different from the shard's ``split``.
+    """
+    ctx = click.get_current_context(silent=True)
+    if split is None or ctx is None:
+        return
+    if ctx.get_parameter_source("split") in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+        return
+    p = Path(path)
+    if not p.is_file() or p.suffix.lower() not in (".h5", ".hdf5"):
+        return
+    from gttdata.errors import ShardFormatError  # light, but keep start-up free of h5py
+    from gttdata.shards.reader import ShardReader
+
+    try:
+        with ShardReader(p) as reader:
+            own = reader.attrs.get("split")
+    except ShardFormatError:
+        return
+    if own is not None and own != split:
+        raise click.ClickException(
+            f"{p}: --split {split!r} contradicts the shard's own split {own!r}; a shard file holds one "
+            f"split (drop --split, or pass --split {own})"
+        )

@@ -27,6 +27,7 @@ data being exported (``protect``).
 from __future__ import annotations
 
 import os
+import shutil
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,6 +41,7 @@ from gttdata.cameras import Camera, CameraRig
 from gttdata.capture.sample import CaptureSample
 from gttdata.detectors import Keypoints2D, write_keypoints
 from gttdata.errors import GttDataError, OutputError
+from gttdata.fileio import fsync_dir, write_error
 
 __all__ = ["EXPORT_FORMATS", "camera_rig_of", "export_capture", "realistic_confidence"]
 
@@ -188,7 +190,8 @@ def export_capture(
     Raises:
         GttDataError: ``out`` is not empty and ``overwrite`` is False.
         OutputError: ``out`` overlaps a protected path, or ``overwrite`` finds something other than an
-            earlier export there (nothing is deleted).
+            earlier export there (nothing is deleted); or a write failed (full disk...): one line naming
+            ``out``, and nothing of the new export is left in it.
     """
     if fmt not in EXPORT_FORMATS:
         raise ValueError(f"format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
@@ -197,9 +200,82 @@ def export_capture(
     if out.exists() and any(out.iterdir()):
         if not overwrite:
             raise GttDataError(f"{out}: output folder is not empty; pass --overwrite to replace its export")
-        _remove_previous_export(out)
-    out.mkdir(parents=True, exist_ok=True)
     rig = camera_rig_of(sample)
+    # The export is written whole into a hidden sibling folder first: a failed write (a full disk)
+    # leaves nothing of it, and an earlier export being replaced is removed only once it succeeded.
+    work = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir()
+        _write_export(
+            sample,
+            rig,
+            work,
+            fmt=fmt,
+            units=units,
+            shared_clock=shared_clock,
+            seed=seed,
+            dlc_suffix=dlc_suffix,
+        )
+        _fsync_tree(work)
+        if out.exists() and any(out.iterdir()):
+            _remove_previous_export(out)  # overwrite (checked above): only what that export wrote
+        _move_into_place(work, out)
+    except OSError as exc:
+        raise write_error(out, exc) from exc
+    except OutputError as exc:  # an inner atomic write names its file inside the hidden folder
+        raise OutputError(str(exc).replace(str(work), str(out))) from exc
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out / "project.toml"
+
+
+def _fsync_tree(folder: Path) -> None:
+    """Flush every file under ``folder`` to disk (the renames that publish them must not outrun them)."""
+    for path in sorted(folder.rglob("*")):
+        if path.is_file():
+            with open(path, "rb+") as fh:
+                os.fsync(fh.fileno())
+
+
+def _move_into_place(work: Path, out: Path) -> None:
+    """Publish the finished export ``work`` as ``out`` (renames only: they need no disk space).
+
+    A new ``out`` is one rename. Into an existing folder, which may hold other files, each entry is
+    renamed in, ``project.toml`` last.
+
+    Raises:
+        OutputError: ``out`` holds a file of the same name that no earlier export wrote (nothing moved).
+    """
+    if not out.exists():
+        os.replace(work, out)
+    else:
+        entries = sorted(work.iterdir(), key=lambda p: (p.name == "project.toml", p.name))
+        taken = [p.name for p in entries if (out / p.name).exists() or (out / p.name).is_symlink()]
+        if taken:
+            raise OutputError(
+                f"{out}: holds {', '.join(taken)}, which no earlier gttdata export wrote there; "
+                "nothing of the new export was moved in, choose an empty or new --out"
+            )
+        for p in entries:
+            os.replace(p, out / p.name)
+    fsync_dir(out)
+    fsync_dir(out.parent)
+
+
+def _write_export(
+    sample: CaptureSample,
+    rig: CameraRig,
+    out: Path,
+    *,
+    fmt: str,
+    units: str,
+    shared_clock: bool,
+    seed: int,
+    dlc_suffix: str,
+) -> None:
+    """Write every file of the export into the existing, empty folder ``out``."""
     save_calibration(rig, out / "calibration.toml", units=units)
     conf = realistic_confidence(sample, np.random.default_rng(seed))
     names = sample.skeleton.joint_names
@@ -245,6 +321,4 @@ def export_capture(
         "source": f"gttdata export of {sample.name} ({sample.motion_name}), format {fmt}",
         "cameras": cameras,
     }
-    path = out / "project.toml"
-    _write_text(path, tomli_w.dumps(project))
-    return path
+    _write_text(out / "project.toml", tomli_w.dumps(project))

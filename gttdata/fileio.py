@@ -25,14 +25,18 @@ from gttdata.errors import OutputError
 
 __all__ = [
     "LOCK_NAME",
+    "TRAINING_RUN_MARKERS",
     "OutputLock",
     "atomic_write",
     "check_output",
+    "dataset_contents",
     "describe_os_error",
     "die_with_parent",
     "file_sha256",
+    "file_size_limit",
     "fsync_dir",
     "remove_output",
+    "refuse_foreign_output",
     "reserve_space",
     "trim_reserve",
     "write_bytes_atomic",
@@ -48,7 +52,7 @@ _REASONS = {
     errno.EROFS: "read-only file system",
     errno.EACCES: "permission denied",
     errno.EPERM: "operation not permitted",
-    errno.EFBIG: "file too large for the file system",
+    errno.EFBIG: "file too large",
     errno.EIO: "input/output error",
 }
 
@@ -157,6 +161,7 @@ def reserve_space(fd: int, offset: int, length: int, path: str | Path) -> None:
     """
     import ctypes
 
+    _check_size_limit(offset + length, path)
     fn = _fallocate()
     if fn is not None and length > 0:
         if fn(fd, _FALLOC_FL_KEEP_SIZE, offset, length) == 0:
@@ -167,6 +172,30 @@ def reserve_space(fd: int, offset: int, length: int, path: str | Path) -> None:
     st = os.fstatvfs(fd)
     if st.f_bavail * st.f_frsize < length:
         raise write_error(path, OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)))
+
+
+def file_size_limit() -> int | None:
+    """This process's largest writable file size in bytes (``ulimit -f``), or None when unlimited."""
+    try:
+        import resource
+    except ImportError:  # not on POSIX
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    return None if soft == resource.RLIM_INFINITY or soft < 0 else int(soft)
+
+
+def _check_size_limit(end: int, path: str | Path) -> None:
+    """Refuse to grow a file past the per-process size limit (EFBIG) before a write meets it.
+
+    ``fallocate`` with ``FALLOC_FL_KEEP_SIZE`` does not apply ``RLIMIT_FSIZE`` (the size does not
+    change), so the limit would first surface inside HDF5's writes, which it does not survive.
+    """
+    limit = file_size_limit()
+    if limit is not None and end > limit:
+        raise OutputError(
+            f"{path}: cannot write: {describe_os_error(OSError(errno.EFBIG, os.strerror(errno.EFBIG)))}: "
+            f"the file would reach {end} bytes, over this process's file size limit of {limit} bytes (ulimit -f)"
+        )
 
 
 def trim_reserve(path: str | Path) -> None:
@@ -261,6 +290,57 @@ def check_output(
             else "pass --overwrite to replace it"
         )
         raise OutputError(f"{path}: already holds {what}; {ways}")
+
+
+#: Files that only a ``gttnet train`` run writes into its folder (all are in ``gttnet.train.rundir.RUN_FILES``).
+TRAINING_RUN_MARKERS = ("checkpoint.pt", "model.pt", "model.json", "log.jsonl", "item_cache")
+
+
+def dataset_contents(folder: str | Path) -> str | None:
+    """What makes ``folder`` a gttdata dataset, in words (``manifest.json and 3 shard files``), or None."""
+    folder = Path(folder)
+    found = []
+    if (folder / "manifest.json").is_file():
+        found.append("manifest.json")
+    n = sum(1 for _ in folder.glob("*/shard-*.h5")) + sum(1 for _ in folder.glob("*/shard-*.h5.tmp"))
+    if n:
+        found.append(f"{n} shard file{'s' if n > 1 else ''}")
+    return " and ".join(found) or None
+
+
+def refuse_foreign_output(folder: str | Path, *, writer: str) -> None:
+    """Refuse to write a dataset into a training run's folder, or a training run into a dataset's.
+
+    ``gttnet train --out`` and ``gttdata generate --out`` each manage their own files (``--overwrite``
+    deletes them); mixing the two in one folder would leave neither intact. Refused whatever the flags.
+
+    Args:
+        folder: The output folder.
+        writer: ``"gttdata generate"`` (writes a dataset) or ``"gttnet train"`` (writes a training run).
+
+    Raises:
+        OutputError: ``folder`` holds the other kind of output, naming what it holds.
+        ValueError: Unknown ``writer``.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return
+    if writer == "gttdata generate":
+        run = [name for name in TRAINING_RUN_MARKERS if (folder / name).exists()]
+        if run:
+            raise OutputError(
+                f"{folder}: holds a gttnet training run ({', '.join(run)}), not a dataset; "
+                "write the dataset to another folder (--out)"
+            )
+    elif writer == "gttnet train":
+        data = dataset_contents(folder)
+        if data:
+            raise OutputError(
+                f"{folder}: holds a gttdata dataset ({data}), not a training run; "
+                "write the run to another folder (--out)"
+            )
+    else:
+        raise ValueError(f"writer must be 'gttdata generate' or 'gttnet train', got {writer!r}")
 
 
 def remove_output(paths: list[Path]) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from gttdata import __version__
 from gttdata.errors import ManifestError, RecipeError, ShardFormatError
-from gttdata.fileio import OutputLock, check_output, die_with_parent, remove_output
+from gttdata.fileio import OutputLock, check_output, die_with_parent, refuse_foreign_output, remove_output
 from gttdata.generate_plan import build_sample, n_samples, validate_inputs
 from gttdata.manifest import (
     MANIFEST_NAME,
@@ -28,7 +28,7 @@ from gttdata.manifest import (
 from gttdata.recipe import GenerateRecipe, recipe_hash, recipe_to_dict
 from gttdata.shards.inventory import file_sha256, scan_shards
 from gttdata.shards.reader import ShardReader
-from gttdata.shards.schema import SHARD_SUFFIX, TMP_SUFFIX, shard_file_name
+from gttdata.shards.schema import SCHEMA_VERSION, SHARD_SUFFIX, TMP_SUFFIX, shard_file_name
 from gttdata.shards.writer import ShardWriter
 
 __all__ = ["BlockPlan", "generate_dataset", "parse_shard_range", "plan_blocks", "storage_attrs"]
@@ -180,6 +180,8 @@ def _block_ok(out_dir: Path, plan: BlockPlan, attrs: dict, known: dict[str, str]
                     return f"{rel}: written by another recipe"
                 if a.get("generator") != attrs["generator"]:
                     return f"{rel}: written by {a.get('generator')}, not {attrs['generator']}"
+                if a.get("schema_version") != SCHEMA_VERSION:  # e.g. 1.1: no attribute checksum to verify
+                    return f"{rel}: schema {a.get('schema_version')}, this gttdata writes {SCHEMA_VERSION}"
                 if (a.get("part"), a.get("first_index"), a.get("split")) != (part, nxt, plan.split):
                     return f"{rel}: part {a.get('part')} first_index {a.get('first_index')} out of sequence"
                 reader.check()
@@ -196,9 +198,10 @@ def _check_foreign(out_dir: Path, attrs: dict) -> None:
     for path in scan_shards(out_dir)[0]:
         try:
             with ShardReader(path) as reader:
+                reader.check_attrs()  # a flipped byte in recipe_hash is damage, not another recipe
                 found = reader.attrs.get("recipe_hash")
         except ShardFormatError:
-            continue  # unreadable: its block is regenerated (resume) or overwritten
+            continue  # unreadable or damaged: its block is regenerated (resume) or overwritten
         if found != attrs["recipe_hash"]:
             raise ManifestError(
                 f"{path}: recipe_hash: expected {attrs['recipe_hash'][:12]} (this recipe), found {str(found)[:12]}; "
@@ -340,6 +343,7 @@ def generate_dataset(
     validate_inputs(recipe)
     blocks = plan_blocks(recipe)
     selected = [blocks[i] for i in parse_shard_range(shard_range, len(blocks))]
+    refuse_foreign_output(out_dir, writer="gttdata generate")  # before the lock file is made
     with OutputLock(out_dir, "gttdata generate", shared=shard_range is not None):
         return _generate_locked(
             recipe, out_dir, blocks, selected, workers, shard_range, resume, overwrite, progress, counts

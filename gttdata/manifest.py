@@ -226,9 +226,9 @@ def _split_order(recipe: dict, found: set[str]) -> list[str]:
 def _read_entry(root: Path, path: Path) -> tuple[ShardEntry, dict]:
     reader = ShardReader(path)
     try:
-        attrs = reader.attrs
         try:
-            reader.check()  # a manifest blesses only content whose chunk checksums hold
+            reader.check()  # a manifest blesses only content whose attribute and chunk checksums hold
+            attrs = reader.attrs
         except ShardFormatError as exc:
             raise ManifestError(
                 f"{exc}; not indexing it: regenerate it (gttdata generate RECIPE --out {root} --resume)"

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from gttdata._cli_common import sample_options
+from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import friendly_errors
 
 __all__ = ["export_cmd", "register"]
@@ -16,6 +16,7 @@ def _read_sample(source: Path, split: str, sample: int, variant: str):
     from gttdata.dataset import DatasetReader
     from gttdata.shards.reader import ShardReader
 
+    check_shard_split(source, split)
     reader = ShardReader(source) if source.is_file() else DatasetReader(source, split)
     try:
         n = len(reader) if source.is_dir() else None

@@ -91,10 +91,12 @@ def preview_cmd(
       gttdata preview data/gttdata/default --split train --sample 0 --sample 2 --no-3d --out runs/preview
     """
     progress = progress and not quiet
+    from gttdata._cli_common import check_shard_split
     from gttdata.preview._gl import PreviewDependencyError
     from gttdata.preview.plots import open_source, plot_dataset
     from gttdata.preview.render import render_samples
 
+    check_shard_split(source, split)
     reader = open_source(source, split if source.is_dir() else None)
     out = _default_out(source) if out is None else out
     indices = samples or (0,)

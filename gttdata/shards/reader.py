@@ -14,7 +14,9 @@ from h5py import h5d, h5g, h5s
 
 from gttdata.capture.sample import CaptureSample
 from gttdata.errors import MotionFormatError, ShardFormatError
+from gttdata.shards.digest import ATTRS_DIGEST, attrs_digest
 from gttdata.shards.schema import (
+    ATTRS_DIGEST_SINCE_MINOR,
     SAMPLE_FIELDS,
     SAMPLES_GROUP,
     VARIANT_FIELDS,
@@ -26,6 +28,10 @@ from gttdata.skeleton import Skeleton
 __all__ = ["ShardReader"]
 
 _log = logging.getLogger(__name__)
+
+# What h5py raises on damaged HDF5 metadata (a bad object header checksum is a KeyError, a truncated
+# heap an OSError, text that is no longer UTF-8 a UnicodeDecodeError, a ValueError).
+_H5_ERRORS = (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError)
 
 # In-memory dtypes of the CaptureSample fields (the stored dtype may be narrower; see schema.py).
 _MEMORY_DTYPES = {
@@ -152,14 +158,15 @@ class ShardReader:
                         f"{self.path}: attribute n_samples: expected {len(names)} (groups present), found {n}"
                     )
                 self._names = names
+            samples = f[SAMPLES_GROUP]
         except ShardFormatError:
             f.close()
             raise
-        except (OSError, KeyError, ValueError) as exc:
+        except _H5_ERRORS as exc:
             f.close()
             raise ShardFormatError(f"{self.path}: unreadable shard metadata ({_short(exc)})") from exc
         self._file, self._pid = f, os.getpid()
-        self._samples = f[SAMPLES_GROUP]
+        self._samples = samples
 
     # -- metadata ------------------------------------------------------------------------------------
 
@@ -169,16 +176,60 @@ class ShardReader:
         if self._attrs is None:
             raw = self.file.attrs
             out = {}
-            for key in raw:
-                value = raw[key]
-                value = value.decode() if isinstance(value, bytes) else value
-                if key in ("variants", "stats", "recipe", "skeleton", "skeletons") and isinstance(value, str):
-                    value = _attr_json(raw, key, str(self.path)) if value else None
-                elif isinstance(value, np.generic):
-                    value = value.item()
-                out[key] = value
+            try:
+                for key in raw:
+                    value = raw[key]
+                    value = value.decode() if isinstance(value, bytes) else value
+                    if key in ("variants", "stats", "recipe", "skeleton", "skeletons") and isinstance(
+                        value, str
+                    ):
+                        value = _attr_json(raw, key, str(self.path)) if value else None
+                    elif isinstance(value, np.generic):
+                        value = value.item()
+                    out[key] = value
+            except _H5_ERRORS as exc:
+                raise ShardFormatError(f"{self.path}: unreadable root attributes ({_short(exc)})") from exc
             self._attrs = out
         return self._attrs
+
+    def check_attrs(self) -> None:
+        """Verify the attribute checksum (root ``attrs_sha256``) against every attribute of the file.
+
+        A shard of schema 1.0 or 1.1 has none: it is accepted, with a logged warning that its attribute
+        text (sample metadata, skeletons, recipe, statistics) is unchecked.
+
+        Raises:
+            ShardFormatError: The checksum differs (a changed byte in attribute text), is missing from a
+                shard of schema 1.2 or later, or an attribute cannot be read.
+        """
+        f = self.file
+        try:
+            found = f.attrs.get(ATTRS_DIGEST)
+            version = f.attrs.get("schema_version")
+            version = version.decode() if isinstance(version, bytes) else str(version)
+            digest = attrs_digest(f)
+        except _H5_ERRORS as exc:
+            raise ShardFormatError(f"{self.path}: unreadable attributes ({_short(exc)})") from exc
+        if found is None:
+            minor = version.split(".")[1] if version.count(".") == 1 else ""
+            if not minor.isdigit() or int(minor) >= ATTRS_DIGEST_SINCE_MINOR:
+                raise ShardFormatError(
+                    f"{self.path}: root attribute {ATTRS_DIGEST!r} is missing "
+                    f"(schema {version} shards carry it); the attributes cannot be trusted"
+                )
+            _log.warning(
+                "%s: schema %s shard has no attribute checksum; its metadata, skeleton, recipe and "
+                "statistics text is unchecked (regenerate it to add one)",
+                self.path,
+                version,
+            )
+            return
+        found = found.decode(errors="replace") if isinstance(found, bytes) else str(found)
+        if found != digest:
+            raise ShardFormatError(
+                f"{self.path}: {ATTRS_DIGEST}: expected {found[:16]}... (stored), found {digest[:16]}...; "
+                "attribute text (sample metadata, skeleton, recipe or statistics) is corrupt"
+            )
 
     def __len__(self) -> int:
         if self._names is None:
@@ -189,7 +240,12 @@ class ShardReader:
     def variants(self, i: int) -> tuple[str, ...]:
         """Variant names stored for local sample ``i``, ``"orig"`` first."""
         g = self._group(i)
-        names = set(g[VARIANTS_GROUP].keys()) if VARIANTS_GROUP in g else set()
+        try:
+            names = set(g[VARIANTS_GROUP].keys()) if VARIANTS_GROUP in g else set()
+        except _H5_ERRORS as exc:
+            raise ShardFormatError(
+                f"{self._where(i)}: unreadable group {VARIANTS_GROUP!r} ({_short(exc)})"
+            ) from exc
         order = [v for v in (self.attrs.get("variants") or ()) if v in names]
         return ("orig", *order, *sorted(names - set(order)))
 
@@ -232,25 +288,29 @@ class ShardReader:
         """
         name = self._name(i)
         where = self._where(i, name)
+        if variant != "orig" and variant not in self.variants(i):
+            raise KeyError(f"{where}: no variant {variant!r}; stored: {', '.join(self.variants(i))}")
         g = self._group(i)
-        arrays = {spec.name: self._read(g, spec.name, where) for spec in SAMPLE_FIELDS}
-        skeleton = self._skeleton(_attr_str(g.attrs, "skeleton", where), where)
-        meta = _attr_json(g.attrs, "meta", where)
-        if variant != "orig":
-            vg = g[VARIANTS_GROUP] if VARIANTS_GROUP in g else {}
-            if variant not in vg:
-                raise KeyError(f"{where}: no variant {variant!r}; stored: {', '.join(self.variants(i))}")
-            vg = vg[variant]
-            vwhere = f"{where} variant {variant!r}"
-            var = {spec.name: self._read(vg, spec.name, vwhere) for spec in VARIANT_FIELDS}
-            T = var.pop("variant_from_orig")
-            arrays.update(var)
-            arrays["points3d"] = arrays["points3d"] @ T[:3, :3].T + T[:3, 3]
-            meta = _attr_json(vg.attrs, "meta", vwhere)
+        try:
+            arrays = {spec.name: self._read(g, spec.name, where) for spec in SAMPLE_FIELDS}
+            skeleton = self._skeleton(_attr_str(g.attrs, "skeleton", where), where)
+            meta = _attr_json(g.attrs, "meta", where)
+            if variant != "orig":
+                vg = g[VARIANTS_GROUP][variant]
+                vwhere = f"{where} variant {variant!r}"
+                var = {spec.name: self._read(vg, spec.name, vwhere) for spec in VARIANT_FIELDS}
+                T = var.pop("variant_from_orig")
+                arrays.update(var)
+                arrays["points3d"] = arrays["points3d"] @ T[:3, :3].T + T[:3, 3]
+                meta = _attr_json(vg.attrs, "meta", vwhere)
+            sample_name = _attr_str(g.attrs, "name", where)
+            motion_name = _attr_str(g.attrs, "motion_name", where)
+        except _H5_ERRORS as exc:
+            raise ShardFormatError(f"{where}: unreadable metadata ({_short(exc)})") from exc
         try:
             return CaptureSample(
-                name=_attr_str(g.attrs, "name", where),
-                motion_name=_attr_str(g.attrs, "motion_name", where),
+                name=sample_name,
+                motion_name=motion_name,
                 skeleton=skeleton,
                 variant=variant,
                 meta=meta,
@@ -265,8 +325,8 @@ class ShardReader:
         if text not in cache:
             try:
                 cache[text] = Skeleton.from_dict(json.loads(text), source=where)
-            except (json.JSONDecodeError, MotionFormatError) as exc:
-                raise ShardFormatError(f"{where}: attribute 'skeleton': {exc}") from exc
+            except (MotionFormatError, *_H5_ERRORS) as exc:  # JSONDecodeError is a ValueError
+                raise ShardFormatError(f"{where}: attribute 'skeleton': {_short(exc)}") from exc
         return cache[text]
 
     def _read(self, g: h5py.Group, key: str, where: str) -> np.ndarray:
@@ -291,14 +351,19 @@ class ShardReader:
         return data
 
     def check(self) -> None:
-        """Read every sample and variant, so every Fletcher-32 chunk checksum is verified.
+        """Verify the attribute checksum, then read every sample and variant (every Fletcher-32 chunk).
 
         Raises:
-            ShardFormatError: The first corrupt sample, naming shard, sample and field.
+            ShardFormatError: Corrupt attribute text (see :meth:`check_attrs`), or the first corrupt
+                sample, naming shard, sample and field.
         """
+        self.check_attrs()
         for i in range(len(self)):
             for v in self.variants(i):
-                self.read_sample(i, v)
+                try:
+                    self.read_sample(i, v)
+                except KeyError as exc:  # a variant listed by the file that cannot be opened
+                    raise ShardFormatError(f"{self._where(i)}: variant {v!r}: {_short(exc)}") from exc
 
 
 def _short(exc: BaseException) -> str:

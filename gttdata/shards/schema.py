@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from gttdata.errors import ShardFormatError
 
 __all__ = [
+    "ATTRS_DIGEST_SINCE_MINOR",
     "COMPRESSIONS",
     "GT_TOLERANCE_M",
     "FieldSpec",
@@ -29,7 +30,13 @@ __all__ = [
 #: Shard layout version ``MAJOR.MINOR``. Readers accept any minor of their major and refuse other majors.
 #: 1.1 (from 1.0): root attribute ``skeletons``; a skeleton may carry ``extra_bones`` and parents that
 #: follow their children. 1.0 shards read unchanged.
-SCHEMA_VERSION = "1.1"
+#: 1.2 (from 1.1): root attribute ``attrs_sha256``, a SHA-256 over every attribute of the file
+#: (:func:`gttdata.shards.digest.attrs_digest`); 1.0 and 1.1 shards read with a logged warning that
+#: their attribute text is unchecked.
+SCHEMA_VERSION = "1.2"
+
+#: First minor version (of major 1) whose shards must carry the attribute checksum.
+ATTRS_DIGEST_SINCE_MINOR = 2
 
 #: Group holding one subgroup per sample, named by :func:`sample_group_name`.
 SAMPLES_GROUP = "samples"
@@ -117,6 +124,7 @@ ROOT_ATTRS: dict[str, str] = {
     "stats": "JSON statistics of the shard's original samples (see docs/FORMAT.md)",
     "skeleton": "JSON of the first sample's skeleton",
     "skeletons": "JSON object: skeleton name -> number of samples (schema >= 1.1; a shard may mix topologies)",
+    "attrs_sha256": "SHA-256 over every other attribute of every group (schema >= 1.2; see gttdata.shards.digest)",
 }
 
 #: Attributes of each ``samples/<index>`` group.

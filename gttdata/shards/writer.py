@@ -15,6 +15,7 @@ import numpy as np
 
 from gttdata.capture.sample import CaptureSample
 from gttdata.fileio import fsync_dir, reserve_space, trim_reserve
+from gttdata.shards.digest import ATTRS_DIGEST, attrs_digest
 from gttdata.shards.schema import (
     COMPRESSIONS,
     GT_TOLERANCE_M,
@@ -337,6 +338,7 @@ class ShardWriter:
         f.attrs["stats"] = _json(self._stats)
         f.attrs["skeleton"] = self._skeleton
         f.attrs["skeletons"] = _json(self._skeletons)
+        f.attrs[ATTRS_DIGEST] = attrs_digest(f)  # last: it covers every attribute above and the samples'
         f.close()
         self._file = None
         trim_reserve(tmp)

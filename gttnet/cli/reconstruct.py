@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from gttdata._cli_common import sample_options
+from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import RigError, friendly_errors
 from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 
@@ -271,6 +271,7 @@ def _resolve_input(
     from gttnet.io import load_input
     from gttnet.io.recording_input import view_of_loaded
 
+    check_shard_split(input_paths[0], split)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)

@@ -37,8 +37,10 @@ def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
         from gttdata.dataset import CaptureDataset
 
         return CaptureDataset(p, split=split, variant=variant).sample(sample)
+    from gttdata._cli_common import check_shard_split
     from gttnet.io.shards import read_shard_sample
 
+    check_shard_split(p, split)
     return read_shard_sample(p, sample=sample, variant=variant)
 
 

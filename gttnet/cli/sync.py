@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gttdata._cli_common import sample_options
+from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import friendly_errors
 from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 from gttnet.errors import GttNetError
@@ -185,6 +185,7 @@ def sync_cmd(
         view = Recording.load(load_project(input_path)).view("partial", weights=False)
         obs, names = view.observations, list(view.camera_names)
     else:
+        check_shard_split(input_path, split)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", UserWarning)

@@ -14,7 +14,7 @@ import dataclasses
 from pathlib import Path
 
 from gttdata.errors import OutputError
-from gttdata.fileio import check_output, remove_output
+from gttdata.fileio import check_output, refuse_foreign_output, remove_output
 from gttnet.train.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from gttnet.train.recipe import TrainRecipe, recipe_to_dict, saved_run_recipe
 
@@ -83,10 +83,12 @@ def open_run(
         ``(recipe, checkpoint payload or None)``; the recipe's ``output_dir`` is ``out``.
 
     Raises:
-        OutputError: ``out`` holds a run and neither flag is given, or holds a run of another recipe.
+        OutputError: ``out`` holds a run and neither flag is given, or holds a run of another recipe, or
+            ``out`` holds a gttdata dataset.
         FileNotFoundError: ``recipe`` is None and ``out`` holds no checkpoint to resume from.
     """
     run_dir = Path(out)
+    refuse_foreign_output(run_dir, writer="gttnet train")  # whatever the flags: never touch a dataset
     if recipe is None:
         if not resume:
             raise ValueError("train() needs a recipe, or resume=True to continue the run in out")
