@@ -33,6 +33,9 @@ _log = logging.getLogger(__name__)
 # heap an OSError, text that is no longer UTF-8 a UnicodeDecodeError, a ValueError).
 _H5_ERRORS = (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError)
 
+# Shards without an attribute checksum (schema < 1.2) this process was warned about (at most one).
+_WARNED_UNCHECKED: list[str] = []
+
 # In-memory dtypes of the CaptureSample fields (the stored dtype may be narrower; see schema.py).
 _MEMORY_DTYPES = {
     "cam_id": np.int32,
@@ -217,12 +220,15 @@ class ShardReader:
                     f"{self.path}: root attribute {ATTRS_DIGEST!r} is missing "
                     f"(schema {version} shards carry it); the attributes cannot be trusted"
                 )
-            _log.warning(
-                "%s: schema %s shard has no attribute checksum; its metadata, skeleton, recipe and "
-                "statistics text is unchecked (regenerate it to add one)",
-                self.path,
-                version,
-            )
+            if not _WARNED_UNCHECKED:  # once per process: a dataset has many shards of one schema
+                _WARNED_UNCHECKED.append(str(self.path))
+                _log.warning(
+                    "warning: %s: schema %s shard has no attribute checksum; its metadata, skeleton, recipe "
+                    "and statistics text is unchecked (regenerate it to add one; shown once, for the first "
+                    "such shard)",
+                    self.path,
+                    version,
+                )
             return
         found = found.decode(errors="replace") if isinstance(found, bytes) else str(found)
         if found != digest:
