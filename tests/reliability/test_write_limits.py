@@ -90,3 +90,20 @@ def test_export_on_a_full_disk_is_one_line_and_keeps_the_old_export(tiny_data, t
     fresh = tmp_path / "fresh"
     line = one_line_error(CliRunner().invoke(main, _export(tiny_data, fresh)))
     assert str(fresh) in line and not fresh.exists()
+
+
+def test_export_into_a_folder_with_other_files_keeps_them_and_never_mixes(tiny_data, tmp_path):
+    """``--overwrite`` into a folder that also holds the user's files: those stay; a name clash is one line."""
+    out = tmp_path / "rec"
+    assert CliRunner().invoke(main, _export(tiny_data, out)).exit_code == 0
+    (out / "notes.txt").write_text("mine")
+    assert CliRunner().invoke(main, _export(tiny_data, out, "--overwrite")).exit_code == 0
+    assert (out / "notes.txt").read_text() == "mine" and (out / "project.toml").is_file()
+    (out / "cam_0").rename(tmp_path / "cam_0_moved")  # the earlier export no longer lists ...
+    (out / "cam_0").mkdir()
+    (out / "cam_0" / "mine.txt").write_text("mine")  # ... a folder of the user's with its name
+    res = CliRunner().invoke(main, _export(tiny_data, out, "--overwrite"))
+    line = one_line_error(res)
+    assert str(out) in line and "cam_0" in line
+    assert (out / "cam_0" / "mine.txt").read_text() == "mine" and (out / "notes.txt").read_text() == "mine"
+    assert not _leftovers(tmp_path)
