@@ -12,18 +12,22 @@ import numpy as np
 from gttdata.capture.views import Observations
 from gttnet.errors import GttNetError
 from gttnet.methods import Reconstruction, register_method
-from gttnet.sync.clocks import apply_clocks, clock_times
+from gttnet.sync.clocks import Clocks, apply_clocks, clock_times
+from gttnet.sync.rates import time_warnings
 from gttnet.sync.recover import recover_clocks
+from gttnet.sync.streams import ORDER_SOURCES, choose_streams, root_rank, view_from_rank
 
 __all__ = [
     "AUTO",
     "SOLVERS",
+    "STREAM_SYNC_MAX_RMS_NOISE",
     "STREAM_SYNC_MAX_RMS_PX",
     "count_rates",
     "order_free_fallback",
     "reconstruct_auto",
     "reconstruct_stream_sync",
     "reconstruct_sync",
+    "time_checks",
 ]
 
 log = logging.getLogger(__name__)
@@ -54,7 +58,8 @@ def reconstruct_sync(
     Args:
         obs: Observations with each camera's frame order (``partial``; a ``full`` input's timestamps are
             ignored and re-estimated).
-        fps: Nominal frame rate per camera (one value, a list by camera id, or ``{camera: Hz}``).
+        fps: Nominal frame rate per camera (one value, a list by camera id, or ``{camera: Hz}``), checked
+            against the images (:func:`gttnet.sync.rates.check_rates`); None: estimated, with a warning.
         frame_times_s: Per-image times on each camera's own clock, seconds, shape ``(N,)``.
         max_offset_s: Largest offset searched between two cameras, seconds.
         estimate_drift: Fit per-camera clock drift (None: when a stream spans over 30 s).
@@ -62,41 +67,82 @@ def reconstruct_sync(
             or ``"dct"``.
 
     Returns:
-        Reconstruction in the input's image order; ``order`` ranks the recovered times; ``info`` holds
-        ``clock_offsets_s`` ({camera: s}), ``clocks`` (the full table), ``timestamp_s`` (per image, input
-        order) and the time spent in each stage.
+        Reconstruction in the input's image order; ``order`` ranks the recovered times (images of cameras
+        left out last); ``info`` holds ``clock_offsets_s`` ({camera: s}), ``clocks`` (the full table),
+        ``timestamp_s`` (per image, input order; None for a camera left out), the time spent in each stage,
+        and :func:`time_checks`'s keys: ``clock_residual_px``, ``noise_px``, ``frame_rates``,
+        ``cameras_left_out`` and ``time_warnings``. A camera whose images carry no information for its
+        clock (:func:`gttnet.sync.rates.blind_cameras`) gets no clock: its images' poses are NaN.
     """
-    from gttnet.methods import reconstruct
-
     if solver not in SOLVERS:
         raise ValueError(f"sync: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     t0 = time.perf_counter()
     clocks = recover_clocks(
         obs, fps=fps, frame_times_s=frame_times_s, max_offset_s=max_offset_s, estimate_drift=estimate_drift
     )
-    t = clock_times(obs, clocks, frame_times_s=frame_times_s)
     t1 = time.perf_counter()
-    inner = reconstruct(apply_clocks(obs, clocks, frame_times_s=frame_times_s), solver, **SOLVERS[solver])
-    seq = np.argsort(t, kind="stable")
-    X = np.empty_like(inner.points3d)
+    rec = _timed_solve(obs, clocks, frame_times_s=frame_times_s, solver=solver)
+    return replace(rec, info={**rec.info, "sync_seconds": t1 - t0})
+
+
+def _timed_solve(
+    obs: Observations, clocks: Clocks, *, frame_times_s: np.ndarray | None, solver: str
+) -> Reconstruction:
+    """The full-sequencing ``solver`` on the times ``clocks`` give; images of cameras without a clock NaN."""
+    from gttnet.methods import reconstruct
+
+    left = {int(c): why for c, why in clocks.info.get("left_out", {}).items()}
+    timed = np.flatnonzero(~np.isin(obs.cam_id, list(left)))  # images of cameras with a clock
+    sub = obs.take(timed) if left else obs
+    ft = None if frame_times_s is None else np.asarray(frame_times_s)[timed]
+    t_sub = clock_times(sub, clocks, frame_times_s=ft)
+    inner = reconstruct(apply_clocks(sub, clocks, frame_times_s=ft), solver, **SOLVERS[solver])
+    seq = timed[np.argsort(t_sub, kind="stable")]
+    X = np.full((obs.n_images, obs.n_joints, 3), np.nan)  # images without a clock: no pose
     X[seq] = inner.points3d
+    rest = np.setdiff1d(np.arange(obs.n_images), timed)
     rank = np.empty(obs.n_images, dtype=np.int64)
-    rank[seq] = np.arange(obs.n_images)
-    return Reconstruction(
-        points3d=X,
-        order=rank,
-        info={
-            "clock_offsets_s": {
-                str(int(c)): float(o) for c, o in zip(clocks.cameras, clocks.offset_s, strict=True)
-            },
-            "clocks": clocks.to_dict(),
-            "timestamp_s": t.tolist(),
-            "solver": solver,
-            "solver_info": inner.info,
-            "sync_seconds": t1 - t0,
-            "solve_seconds": inner.seconds,
+    rank[np.r_[seq, rest[np.lexsort((_frame_order(obs)[rest], obs.cam_id[rest]))]]] = np.arange(obs.n_images)
+    t = np.full(obs.n_images, np.nan)
+    t[timed] = t_sub
+    info = {
+        "clock_offsets_s": {
+            str(int(c)): float(o) for c, o in zip(clocks.cameras, clocks.offset_s, strict=True)
         },
-    )
+        "clocks": clocks.to_dict(),
+        "timestamp_s": [None if not np.isfinite(x) else float(x) for x in t],
+        "solver": solver,
+        "solver_info": inner.info,
+        "solve_seconds": inner.seconds,
+        **time_checks(clocks),
+    }
+    return Reconstruction(points3d=X, order=rank, info=info)
+
+
+def _frame_order(obs: Observations) -> np.ndarray:
+    """Each image's frame index within its camera (its position in the input where the order is unknown)."""
+    return np.arange(obs.n_images) if obs.stream_index is None else np.asarray(obs.stream_index)
+
+
+def time_checks(clocks: Clocks) -> dict:
+    """The timing diagnostics ``sync`` and ``stream-sync`` put in ``rec.info`` (for the quality checks).
+
+    Returns:
+        ``clock_residual_px`` (the clock fit's robust reprojection RMS, pixels, or None without the
+        refinement), ``noise_px`` (the capture's 2-D noise estimate, :mod:`gttnet.geometry.noise`, pixels, or
+        None), ``frame_rates`` (:func:`gttnet.sync.rates.check_rates`'s info: per camera ``given_hz``,
+        ``estimated_hz``, ``used_hz``, ``relative``, ``miss_px``...; None when not checked),
+        ``cameras_left_out`` (``{camera id: reason}``: no clock, no pose) and ``time_warnings`` (the
+        ``warning:`` lines, cameras by id).
+    """
+    ci = clocks.info
+    out = {
+        "clock_residual_px": ci.get("rms_px"),
+        "noise_px": ci.get("noise_px"),
+        "frame_rates": ci.get("rates"),
+        "cameras_left_out": dict(ci.get("left_out", {})),
+    }
+    return {**out, "time_warnings": time_warnings(out)}
 
 
 def count_rates(cam_id: np.ndarray, top_hz: float = 30.0) -> dict[int, float]:
@@ -109,10 +155,11 @@ def count_rates(cam_id: np.ndarray, top_hz: float = 30.0) -> dict[int, float]:
     return {int(c): top_hz * float(k) / float(counts.max()) for c, k in zip(cams, counts, strict=True)}
 
 
-#: ``stream-sync`` trusts clocks recovered on estimated streams only if they explain the images to within this
-#: reprojection RMS (pixels; the clock refinement's robust RMS). On the validation captures of the paper, CMU
-#: and default recipes, where the estimated streams beat GTT-Net the clocks mostly left 0.9-2.4 px, where
-#: they lost mostly 3-19 px; limits of 2.5-4 px scored the same. Above it, the fallback method runs instead.
+#: ``stream-sync`` trusts clocks recovered on estimated streams only if their fit's reprojection RMS (the
+#: clock refinement's robust RMS) is within this many times the capture's 2-D noise estimate. Right clocks
+#: leave 0.75-1.1 times the noise (sync recipe, 1, 2 and 5 px; ``benchmarks/ablation_stream_sync.py``).
+STREAM_SYNC_MAX_RMS_NOISE = 1.5
+#: The gate, pixels, where the noise cannot be measured (streams too short), and the former fixed gate.
 STREAM_SYNC_MAX_RMS_PX = 3.0
 
 
@@ -128,70 +175,114 @@ def reconstruct_stream_sync(
     order_k: int = 32,
     solver: str = "hpf",
     fallback: str | None = "dloe",
-    max_rms_px: float = STREAM_SYNC_MAX_RMS_PX,
+    max_rms_px: float | None = None,
+    max_rms_noise: float = STREAM_SYNC_MAX_RMS_NOISE,
+    order_sources: Sequence[str] | None = None,
 ) -> Reconstruction:
     """``sync`` on camera streams estimated from the poses, for captures with no timing at all.
 
-    Without sequencing, each camera's frames are put in the order of the spectral order of a pose graph
-    over the pseudo-triangulated poses (:func:`gttnet.model.inputs.order_streams`, ``order_k`` links per
-    image; within one camera consecutive frames lie several global images apart, so this per-camera order
-    is far more often right than the global one). Then the cameras' clocks are recovered and the
+    Without sequencing, each camera's frame order is taken from several sources (:mod:`gttnet.sync.streams`:
+    the pose graph of the pseudo-triangulated poses, DLOE's recovered order, the root trajectory, and
+    GTT-Net's order where GTT-Net is the fallback); the cameras' clocks are recovered on each, and the
+    streams whose clocks explain the images best are kept (lowest clock-fit residual). Then the
     high-pass-filter prior solves on the recovered times, as :func:`reconstruct_sync` does. Given streams
     (``partial``, ``full``) are used as they are.
 
-    Works where the motion does not come back to the same poses: a periodic motion (walking on the spot)
-    or a failed pseudo-triangulation leaves the per-camera order wrong, and the smoothness prior then ties
-    together moments that are not neighbours. Such clocks do not explain the images: when the streams were
-    estimated and the recovered clocks leave a reprojection RMS above ``max_rms_px``, or the clocks cannot be
-    recovered at all (a camera with fewer than three images), the ``fallback`` method (an order-free one)
-    reconstructs the capture instead (README, "Synchronizing cameras after the
-    fact", has the validation numbers).
+    A wrong order (a periodic motion ordered by pose, a failed pseudo-triangulation) leaves clocks that do
+    not explain the images: when the streams were estimated and the kept clocks leave a reprojection RMS
+    above ``max_rms_noise`` times the capture's noise estimate (or ``max_rms_px`` pixels when given), or no
+    clocks can be recovered (fewer than two cameras with three images), the ``fallback`` method (an
+    order-free one) reconstructs the capture instead.
 
     Args:
         obs: Observations of any sequencing condition.
-        fps: Nominal frame rate per camera; None: :func:`count_rates` (the cameras are assumed to film the
-            same span).
+        fps: Nominal frame rate per camera; None: estimated from the images (with a warning).
         order_k: Links per image of the pose graph that orders the streams.
         solver: Full-sequencing solver after clock recovery (see :data:`SOLVERS`).
         fallback: Method for estimated streams whose clocks fail the check; None keeps them regardless.
-        max_rms_px: The check's largest reprojection RMS of the recovered clocks, pixels.
+        max_rms_px: A fixed gate on the clocks' reprojection RMS, pixels (None: relative to the noise).
+        max_rms_noise: The gate relative to the noise estimate.
+        order_sources: Sources of the camera streams (None: :data:`gttnet.sync.streams.ORDER_SOURCES`, plus
+            ``gttnet`` when it is the fallback).
 
     Returns:
         :func:`reconstruct_sync`'s reconstruction, or the fallback's, in the input's image order. ``info``
-        adds ``streams_estimated``, ``clock_rms_px`` and ``method_ran`` (``stream-sync`` or the fallback).
+        adds ``streams_estimated``, ``clock_rms_px`` (= ``clock_residual_px``), ``gate_px``,
+        ``order_source`` (the kept source), ``order_sources`` (per source: ``rms_px``, ``noise_px``,
+        ``n_residuals`` or ``error``), :func:`time_checks`'s keys and ``method_ran`` (``stream-sync`` or
+        the fallback).
     """
+    if obs.sequencing != "none":
+        rec = reconstruct_sync(obs, fps=fps, solver=solver)
+        checks = {"streams_estimated": False, "clock_rms_px": rec.info["clock_residual_px"]}
+        return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
+    from gttnet.methods import reconstruct
+
+    sources = tuple(order_sources) if order_sources is not None else ORDER_SOURCES
+    if order_sources is None and fallback == "gttnet":
+        sources += ("gttnet",)
+    ran: dict[str, Reconstruction] = {}
+    for name in ("dloe", "gttnet"):
+        if name in sources:
+            ran[name] = reconstruct(obs, name)
+    views = _candidate_views(obs, sources, order_k=order_k, ranks={k: r.order for k, r in ran.items()})
+    choice = choose_streams(views, fps=fps)
+    sigma = choice.noise_px
+    gate = max_rms_px if max_rms_px is not None else (
+        STREAM_SYNC_MAX_RMS_PX if sigma is None else max_rms_noise * sigma
+    )  # fmt: skip
+    rms = None if choice.clocks is None else choice.clocks.info.get("rms_px")
+    checks: dict = {
+        "streams_estimated": True,
+        "clock_rms_px": rms,
+        "gate_px": gate,
+        "order_source": choice.source,
+        "order_sources": choice.table,
+    }
+    if choice.clocks is not None:
+        checks.update(time_checks(choice.clocks))
+    else:
+        checks["noise_px"] = sigma
+    if fallback is not None and not (rms is not None and rms <= gate):
+        why = f"the clocks leave {rms} px RMS (> {gate:.2f})" if rms is not None else "no clocks recovered"
+        log.info("stream-sync: %s; %s instead", why, fallback)
+        fb = ran[fallback] if fallback in ran else reconstruct(obs, fallback)
+        return replace(fb, info={**fb.info, **checks, "method_ran": fallback})
+    if choice.clocks is None:
+        errors = "; ".join(f"{k}: {v['error']}" for k, v in choice.table.items() if "error" in v)
+        raise GttNetError(f"stream-sync: no camera streams gave clocks ({errors})")
+    assert choice.view is not None  # with its clocks
+    rec = _timed_solve(choice.view, choice.clocks, frame_times_s=None, solver=solver)
+    return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
+
+
+def _candidate_views(
+    obs: Observations, sources: Sequence[str], *, order_k: int, ranks: Mapping[str, np.ndarray | None]
+) -> dict[str, Observations]:
+    """One ``partial`` view of the order-free ``obs`` per order source (:mod:`gttnet.sync.streams`)."""
     from gttnet.geometry.candidates import candidate_pseudo_triangulate, use_candidate_search
     from gttnet.geometry.triangulation import pseudo_triangulate
     from gttnet.model.inputs import order_streams
 
-    view = obs
-    if obs.sequencing == "none":
+    unknown = sorted(set(sources) - {*ORDER_SOURCES, "gttnet"})
+    if unknown:
+        raise ValueError(
+            f"stream-sync: order sources must be among {(*ORDER_SOURCES, 'gttnet')}, got {unknown}"
+        )
+    views: dict[str, Observations] = {}
+    if "pose-graph" in sources or "root" in sources:
         args = (obs.centers(), obs.rays(), obs.visible, obs.cam_id)
         # above DENSE_MAX_IMAGES the k-d tree candidate search: the exhaustive one is O(N^2 J) in memory
         big = use_candidate_search("none", obs.n_images, "auto")
         x_init = candidate_pseudo_triangulate(*args).X_init if big else pseudo_triangulate(*args).X_init
-        view = order_streams(obs, x_init, k=order_k)
-    checked = obs.sequencing == "none" and fallback is not None  # only estimated streams are checked
-    rec: Reconstruction | None = None
-    why = ""
-    try:
-        rec = reconstruct_sync(view, fps=count_rates(obs.cam_id) if fps is None else fps, solver=solver)
-    except GttNetError as exc:  # e.g. a camera with too few images for clock recovery
-        if not checked:
-            raise
-        why = str(exc)
-    rms = None if rec is None else rec.info["clocks"].get("info", {}).get("rms_px")
-    checks = {"streams_estimated": obs.sequencing == "none", "clock_rms_px": rms}
-    if checked and not (rms is not None and rms <= max_rms_px):  # rec None: rms None too
-        from gttnet.methods import reconstruct
-
-        assert fallback is not None  # checked implies it
-        why = why or f"the clocks leave {rms} px RMS (> {max_rms_px:g})"
-        log.info("stream-sync: %s; %s instead", why, fallback)
-        fb = reconstruct(obs, fallback)
-        return replace(fb, info={**fb.info, **checks, "method_ran": fallback})
-    assert rec is not None  # without a check, a failed recovery was raised above
-    return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
+        if "pose-graph" in sources:
+            views["pose-graph"] = order_streams(obs, x_init, k=order_k)
+        if "root" in sources:
+            views["root"] = view_from_rank(obs, root_rank(x_init))
+    for name, rank in ranks.items():
+        if rank is not None:
+            views[name] = view_from_rank(obs, rank)
+    return views
 
 
 #: What ``auto`` runs under each sequencing condition: the most accurate method of the project's own

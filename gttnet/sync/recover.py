@@ -37,6 +37,8 @@ from gttnet.errors import GttNetError
 from gttnet.sync.clocks import Clocks, local_times, per_camera_rates
 from gttnet.sync.fusion import fuse_clocks, fuse_offsets
 from gttnet.sync.pairs import Stream, camera_streams, pair_errors, pair_offset, ray_meeting_error
+from gttnet.sync.rates import blind_cameras, time_warnings
+from gttnet.sync.rates import check_rates as rate_check
 
 __all__ = [
     "N_WINDOWS",
@@ -272,6 +274,39 @@ def _recover_piecewise(
     return o, d, std, info
 
 
+def _leave_out_blind(
+    obs: Observations, frame_times_s: np.ndarray | None
+) -> tuple[Observations, np.ndarray | None, dict[int, str]]:
+    """``obs`` (and its frame times) without the cameras that :func:`blind_cameras` finds, and those.
+
+    Raises:
+        GttNetError: Fewer than two cameras see the subject.
+    """
+    blind = blind_cameras(obs)
+    if not blind:
+        return obs, frame_times_s, {}
+    keep = np.flatnonzero(~np.isin(obs.cam_id, list(blind)))
+    seeing = np.unique(obs.cam_id[keep]).size
+    if seeing < 2:
+        names = ", ".join(str(c) for c in blind)
+        raise GttNetError(f"clock recovery needs two cameras that see the subject; cameras {names} see none")
+    ft = None if frame_times_s is None else np.asarray(frame_times_s)[keep]
+    return obs.take(keep), ft, blind
+
+
+def _noise_px(obs: Observations, tau: np.ndarray) -> float | None:
+    """The capture's 2-D noise, pixels (:func:`gttnet.geometry.noise.stream_noise_px`), None if unmeasurable."""
+    from gttnet.geometry.noise import stream_noise_px
+
+    si = obs.stream_index
+    if si is None:  # frame times only: rank within each stream
+        si = np.empty(obs.n_images, dtype=np.int64)
+        for c in np.unique(obs.cam_id):
+            sel = np.flatnonzero(obs.cam_id == c)
+            si[sel[np.argsort(tau[sel], kind="stable")]] = np.arange(sel.size)
+    return stream_noise_px(obs.keypoints_px, obs.visible, obs.cam_id, si)
+
+
 def recover_clocks(
     obs: Observations,
     *,
@@ -284,6 +319,7 @@ def recover_clocks(
     f_scale_px: float = 3.0,
     refine: bool = True,
     piecewise: bool | None = None,
+    check_rates: bool = True,
 ) -> Clocks:
     """Recover every camera's clock from the 2-D joints alone (no timestamps are read).
 
@@ -311,22 +347,39 @@ def recover_clocks(
             windows spread over the whole recording. None: when the longest stream spans more than
             :data:`PIECEWISE_FROM_S`. Offsets must then be found in the first segment (cameras started
             within about half of it of each other).
+        check_rates: Check the given rates against the images, or estimate them where none are given
+            (:func:`gttnet.sync.rates.check_rates`): a rate the images contradict is replaced, with a
+            warning naming the camera and the likely rate; without ``fps`` or frame times, a warning gives
+            the estimated rates (relative to a reference camera; the absolute scale is assumed).
 
     Returns:
-        :class:`~gttnet.sync.clocks.Clocks` for every camera in ``obs``.
+        :class:`~gttnet.sync.clocks.Clocks` for every camera of ``obs`` that sees the subject: a camera
+        whose images carry no information (:func:`gttnet.sync.rates.blind_cameras`) gets no clock and is
+        named in ``info["left_out"]`` ({camera id: reason}) with a warning. ``info`` also holds
+        ``noise_px`` (the 2-D noise estimate, pixels) and ``rates`` (the rate check's findings).
 
     Raises:
         SequencingError: Without stream order or frame times.
-        GttNetError: Fewer than two cameras, or a camera with fewer than two images.
+        GttNetError: Fewer than two cameras that see the subject, or a camera with fewer than three images.
     """
+    obs, frame_times_s, left_out = _leave_out_blind(obs, frame_times_s)
     rates = per_camera_rates(obs.cam_id, fps)
     tau = local_times(obs, rates, frame_times_s)
-    if fps is None and (frame_times_s is not None or getattr(obs, "stream_time_s", None) is not None):
+    timed = frame_times_s is not None or getattr(obs, "stream_time_s", None) is not None
+    if fps is None and timed:
         # The cameras' own times are known: their nominal rates are the typical frame intervals.
         for c in rates:
             ts = np.sort(tau[obs.cam_id == c])
             if ts.size > 1 and np.median(np.diff(ts)) > 0:
                 rates[c] = float(1.0 / np.median(np.diff(ts)))
+    noise = _noise_px(obs, tau)
+    rate_info = None
+    if check_rates and np.unique(obs.cam_id).size >= 2:
+        f0 = float(np.median(obs.K[:, 0, 0]))
+        rates, tau, rate_info = rate_check(
+            obs, tau, rates, given=fps is not None or timed, f_px=f0, cap=cap_px / f0, noise_px=noise,
+            kernel_frames=kernel_frames,
+        )  # fmt: skip
     cam = np.asarray(obs.cam_id)
     cams = np.unique(cam)
     if cams.size < 2:
@@ -358,6 +411,11 @@ def recover_clocks(
     start = o + (1.0 + 1e-6 * d) * first
     o = o - start.min()
     log.info("clocks: offsets %s s", np.array2string(o, precision=4))
+    info.update({"noise_px": noise, "left_out": {str(c): why for c, why in left_out.items()}})
+    if rate_info is not None:
+        info["rates"] = rate_info
+    for line in time_warnings({"cameras_left_out": left_out, "frame_rates": rate_info}):
+        log.warning("%s", line)
     return Clocks(
         cameras=cams,
         offset_s=o,

@@ -1,0 +1,143 @@
+"""Camera streams of an order-free capture: candidate frame orders from several sources, kept by their clocks.
+
+Without sequencing, each camera's frame order must be estimated before its clock can be recovered. Each
+source gives a global rank of the images, and each camera's frames are put in the order of their ranks:
+
+- ``pose-graph``: the spectral order of a pose graph over the pseudo-triangulated poses
+  (:func:`gttnet.model.inputs.order_streams`); right where the motion does not come back to the same poses.
+- ``dloe``: the order DLOE recovers along with its reconstruction.
+- ``gttnet``: the order GTT-Net recovers (only where a model runs anyway, e.g. as the fallback).
+- ``root``: the position of the skeleton's centre along the main direction it travels (walking, running:
+  a periodic motion whose poses repeat but whose position does not).
+
+A wrong order leaves clocks that do not explain the images: each candidate's clocks are recovered and the
+candidate whose clock fit leaves the lowest reprojection residual (among those whose clocks cover at least
+half as many ray pairs as the best covered) is kept (:func:`choose_streams`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from gttdata.capture.views import Observations
+from gttnet.errors import GttNetError
+from gttnet.geometry.noise import stream_noise_px
+from gttnet.sync.clocks import Clocks
+from gttnet.sync.recover import recover_clocks
+
+__all__ = ["ORDER_SOURCES", "StreamChoice", "choose_streams", "root_rank", "view_from_rank"]
+
+log = logging.getLogger(__name__)
+
+#: Order sources ``stream-sync`` tries by default (``gttnet`` joins them where GTT-Net is the fallback).
+ORDER_SOURCES = ("pose-graph", "dloe", "root")
+
+
+def view_from_rank(obs: Observations, rank: np.ndarray) -> Observations:
+    """``obs`` marked ``partial``, each camera's frames in the order of the global ``rank`` (shape ``(N,)``)."""
+    from gttnet.geometry.ordering import stream_ranks
+
+    return replace(obs, sequencing="partial", stream_index=stream_ranks(np.asarray(rank), obs.cam_id))
+
+
+def root_rank(x: np.ndarray) -> np.ndarray:
+    """Rank of each image along the main direction the skeleton's centre travels, shape ``(N,)``.
+
+    Args:
+        x: Poses, shape ``(N, J, 3)``; NaN joints are ignored (an image without any: the median centre).
+
+    Example:
+        >>> x = np.zeros((4, 2, 3)); x[:, :, 0] = np.array([0.0, 2.0, 1.0, 3.0])[:, None]
+        >>> root_rank(x).tolist()
+        [0, 2, 1, 3]
+    """
+    x = np.asarray(x, dtype=np.float64)
+    ok = np.isfinite(x).all(axis=-1)
+    cnt = ok.sum(axis=1)
+    c = np.where(ok[..., None], x, 0.0).sum(axis=1) / np.maximum(cnt, 1)[:, None]
+    good = cnt > 0
+    if good.any():
+        c[~good] = np.median(c[good], axis=0)
+    d = c - c.mean(axis=0)
+    axis = np.linalg.svd(d, full_matrices=False)[2][0]
+    proj = d @ axis
+    rank = np.empty(x.shape[0], dtype=np.int64)
+    rank[np.argsort(proj, kind="stable")] = np.arange(x.shape[0])
+    return rank
+
+
+@dataclass(frozen=True)
+class StreamChoice:
+    """The camera streams kept and how every source fared.
+
+    Args:
+        source: Name of the kept source, or None when no source's clocks could be recovered.
+        view: The kept ``partial`` view (None with ``source``).
+        clocks: Its recovered clocks (None with ``source``).
+        noise_px: The capture's 2-D noise estimate, pixels: the smallest over the sources' streams (a wrong
+            order only adds to the second differences it is read from), or None.
+        table: Per source: ``rms_px`` (clock fit residual), ``noise_px``, ``n_residuals`` or ``error``.
+    """
+
+    source: str | None
+    view: Observations | None
+    clocks: Clocks | None
+    noise_px: float | None
+    table: dict = field(default_factory=dict)
+
+
+def choose_streams(
+    views: Mapping[str, Observations],
+    *,
+    fps: float | Sequence[float] | Mapping[int, float] | None,
+) -> StreamChoice:
+    """Recover the clocks of every candidate view and keep the one whose clocks explain the images best.
+
+    The frame rates are checked (or, without ``fps``, estimated) on the view with the lowest noise estimate
+    (the best-ordered streams), then held for the others. Among views whose clock fit covers at least half
+    as many ray pairs as the best covered one, the lowest clock residual relative to the noise wins.
+
+    Args:
+        views: Candidate ``partial`` views of one capture, by source name.
+        fps: Nominal frame rates, as :func:`gttnet.sync.recover_clocks` takes them.
+
+    Returns:
+        The :class:`StreamChoice`.
+    """
+    table: dict[str, dict] = {}
+    noise = {}
+    for name, v in views.items():
+        noise[name] = stream_noise_px(v.keypoints_px, v.visible, v.cam_id, v.stream_index)
+        table[name] = {"noise_px": noise[name]}
+    measured = [s for s in noise.values() if s is not None]
+    sigma = min(measured) if measured else None
+    order = sorted(views, key=lambda n: np.inf if noise[n] is None else noise[n])
+    clocks: dict[str, Clocks] = {}
+    rates: float | Sequence[float] | Mapping[int, float] | None = fps
+    rate_info = None
+    for name in order:
+        first = rate_info is None
+        try:
+            cl = recover_clocks(views[name], fps=rates, check_rates=first)
+        except GttNetError as exc:
+            table[name]["error"] = str(exc)
+            continue
+        if first:
+            rate_info = cl.info.get("rates")
+            rates = {int(c): float(r) for c, r in zip(cl.cameras, cl.rate_hz, strict=True)}
+        clocks[name] = cl
+        table[name].update({"rms_px": cl.info.get("rms_px"), "n_residuals": cl.info.get("n_residuals", 0)})
+    if not clocks:
+        return StreamChoice(None, None, None, sigma, table)
+    most = max(table[n]["n_residuals"] for n in clocks)
+    fair = [n for n in clocks if table[n]["n_residuals"] >= 0.5 * most and table[n]["rms_px"] is not None]
+    best = min(fair or list(clocks), key=lambda n: table[n]["rms_px"] or np.inf)
+    cl = clocks[best]
+    if rate_info is not None:  # the rates were checked on another view: report that check
+        cl = replace(cl, info={**cl.info, "rates": rate_info})
+    log.info("stream-sync: order sources %s; kept %s", table, best)
+    return StreamChoice(best, views[best], cl, sigma, table)
