@@ -288,8 +288,8 @@ def _leave_out_blind(
     keep = np.flatnonzero(~np.isin(obs.cam_id, list(blind)))
     seeing = np.unique(obs.cam_id[keep]).size
     if seeing < 2:
-        names = ", ".join(str(c) for c in blind)
-        raise GttNetError(f"clock recovery needs two cameras that see the subject; cameras {names} see none")
+        why = "; ".join(f"camera {c}: {reason}" for c, reason in blind.items())
+        raise GttNetError(f"clock recovery needs two cameras with a usable stream, {seeing} left ({why})")
     ft = None if frame_times_s is None else np.asarray(frame_times_s)[keep]
     return obs.take(keep), ft, blind
 
