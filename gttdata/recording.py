@@ -422,6 +422,8 @@ class Recording:
         for v, (kp, cam_v) in enumerate(zip(self.keypoints, self.rig.cameras, strict=True)):
             xy = undistort_points(kp.xy, cam_v) if undistort else kp.xy
             ok = np.isfinite(kp.score) & (kp.score >= thr) & np.all(np.isfinite(xy), axis=-1)
+            if not ok.any():
+                log.warning("camera %r: no usable detection (%s)", cam_v.name, _why_blind(kp, cam_v, thr))
             t = self.stream_time_s[v]
             for part, value in zip(parts, (
                 np.where(ok[..., None], xy, np.nan), np.where(ok, kp.score, 0.0), np.full(kp.n_frames, v),
@@ -463,6 +465,18 @@ class Recording:
             clock=self.clock,
             source=self.source,
         )
+
+
+def _why_blind(kp, camera, threshold: float) -> str:
+    """Why none of a camera's detections is usable: NaN distortion, NaN scores, or all below the threshold."""
+    if not np.all(np.isfinite(camera.dist)):
+        return f"its distortion coefficients {list(camera.dist)} are not finite"
+    score = np.asarray(kp.score, dtype=np.float64)
+    if not np.isfinite(score).any():
+        return "every detection score is NaN"
+    if not (score[np.isfinite(score)] >= threshold).any():
+        return f"every detection scores below the confidence threshold {threshold:g} (best {np.nanmax(score):.3g})"
+    return "no detection has finite pixel coordinates"
 
 
 def ground_truth_for(view: RecordingView, path: str | Path) -> np.ndarray:

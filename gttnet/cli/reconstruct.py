@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
@@ -127,20 +128,23 @@ class _WarningLines(logging.Handler):
 def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
     """Recording view plus the ground truth an exported project names (scoring only).
 
-    The calibration's unit detection and plausibility warnings become ``warning:`` lines on stderr.
+    The calibration's unit detection and plausibility warnings, and cameras without a usable detection,
+    become ``warning:`` lines on stderr.
     """
     from gttdata.recording import Recording, ground_truth_for
 
-    cal_log = logging.getLogger("gttdata.calibration")
+    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttdata.recording")]
     handler = _WarningLines(logging.WARNING)
-    cal_log.addHandler(handler)
+    for lg in loggers:
+        lg.addHandler(handler)
     try:
         rec = Recording.load(spec)
+        view = rec.view(
+            sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
+        )
     finally:
-        cal_log.removeHandler(handler)
-    view = rec.view(
-        sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
-    )
+        for lg in loggers:
+            lg.removeHandler(handler)
     gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
     return rec, view, gt
 
@@ -196,6 +200,41 @@ def _timing_options(method: str, view) -> dict:
     fps = np.asarray(view.fps, dtype=np.float64)
     if "fps" in params and fps.size and np.all(np.isfinite(fps)):
         out["fps"] = fps.tolist()
+    return out
+
+
+@contextlib.contextmanager
+def _time_warnings_held():
+    """Hold back the clock code's own warning log lines: :func:`_timing_fields` prints them with camera names."""
+    sync_log = logging.getLogger("gttnet.sync")
+    held = logging.NullHandler()
+    sync_log.addHandler(held)
+    try:
+        yield
+    finally:
+        sync_log.removeHandler(held)
+
+
+def _timing_fields(rec, view, *, quiet: bool) -> dict:
+    """Print clock recovery's timing warnings by camera name; return the summary's timing fields.
+
+    The fields, where clocks were recovered: ``frame_rates_hz`` ({name: Hz}) and ``cameras_left_out``
+    ({name: reason}).
+    """
+    from gttnet.sync.rates import time_warnings
+
+    names = dict(enumerate(view.camera_names))
+    if not quiet:
+        for line in time_warnings(rec.info, names):
+            click.echo(f"warning: {line}", err=True)
+    out: dict[str, Any] = {}
+    rates = (rec.info.get("frame_rates") or {}).get("cameras")
+    if rates:
+        out["frame_rates_hz"] = {names.get(int(c), c): round(r["used_hz"], 4) for c, r in rates.items()}
+    if rec.info.get("cameras_left_out"):
+        out["cameras_left_out"] = {
+            names.get(int(c), c): why for c, why in rec.info["cameras_left_out"].items()
+        }
     return out
 
 
@@ -320,7 +359,8 @@ def _resolve_input(
     "--fps",
     type=float,
     multiple=True,
-    help="Frame rate, Hz: once for every camera or once per camera, in order.",
+    help="Frame rate, Hz: once for every camera or once per camera, in order. Clock recovery checks it "
+    "against the images [default: timestamps, else estimated from the images with a warning].",
 )
 @click.option(
     "--timestamps",
@@ -539,10 +579,12 @@ def reconstruct_cmd(
             )
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
         else:
-            rec = reconstruct(obs, method, **_timing_options(method, view), **options)
+            with _time_warnings_held():
+                rec = reconstruct(obs, method, **_timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
+    summary.update(_timing_fields(rec, view, quiet=quiet))
     if blind:
         summary["images_without_joints"] = blind
     if out_paths:

@@ -111,7 +111,8 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
     default=None,
     metavar="HZ",
     help="Nominal frame rate: one for all cameras ('30'), one per camera id ('25,30,60') or pairs "
-    "('0=25,2=60') [default: 30 Hz each; only the offsets' unit depends on it when the rates are equal].",
+    "('0=25,2=60'), checked against the images (a rate they contradict is replaced, with a warning) "
+    "[default: estimated from the images, relative to one camera, with a warning].",
 )
 @click.option(
     "--frame-times",
@@ -172,6 +173,7 @@ def sync_cmd(
 
     from gttnet.io import load_input
     from gttnet.sync import clock_times, recover_clocks
+    from gttnet.sync.rates import time_warnings
 
     rates = parse_fps(fps)
     out = Path(out_path)
@@ -207,8 +209,19 @@ def sync_cmd(
     if frame_times is not None:
         tau = read_frame_times(frame_times, obs.cam_id, obs.stream_index)
     t0 = time.perf_counter()
-    clocks = recover_clocks(obs, fps=rates, frame_times_s=tau, max_offset_s=max_offset, estimate_drift=drift)
+    sync_log = logging.getLogger("gttnet.sync")
+    held = logging.NullHandler()  # printed below, by camera name
+    sync_log.addHandler(held)
+    try:
+        clocks = recover_clocks(
+            obs, fps=rates, frame_times_s=tau, max_offset_s=max_offset, estimate_drift=drift
+        )
+    finally:
+        sync_log.removeHandler(held)
     seconds = time.perf_counter() - t0
+    checks = {"cameras_left_out": clocks.info.get("left_out", {}), "frame_rates": clocks.info.get("rates")}
+    for line in time_warnings(checks, None if names is None else dict(enumerate(names))):
+        click.echo(f"warning: {line}", err=True)
     clocks.save(out, overwrite=overwrite)
     report = {
         "input": str(input_path),
@@ -216,6 +229,7 @@ def sync_cmd(
         "seconds": round(seconds, 4),
         "clocks_path": str(out),
         "cameras": clocks.to_dict()["cameras"],
+        "cameras_left_out": checks["cameras_left_out"],
     }
     if names is not None:  # a recording: camera ids are positions in its camera list
         for row in report["cameras"]:

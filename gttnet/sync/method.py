@@ -214,8 +214,8 @@ def reconstruct_stream_sync(
     """
     if obs.sequencing != "none":
         rec = reconstruct_sync(obs, fps=fps, solver=solver)
-        checks = {"streams_estimated": False, "clock_rms_px": rec.info["clock_residual_px"]}
-        return replace(rec, info={**rec.info, **checks, "method_ran": "stream-sync"})
+        given = {"streams_estimated": False, "clock_rms_px": rec.info["clock_residual_px"]}
+        return replace(rec, info={**rec.info, **given, "method_ran": "stream-sync"})
     from gttnet.methods import reconstruct
 
     sources = tuple(order_sources) if order_sources is not None else ORDER_SOURCES

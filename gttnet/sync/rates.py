@@ -245,6 +245,7 @@ def check_rates(
                 "changed": bool(given and abs(out[c] / rates[c] - 1.0) > _SAME),
             }
         )
+    rows = {str(c): rows[str(c)] for c in cams}  # by camera id
     new_tau = tau * np.array([rates[int(k)] / out[int(k)] for k in cam])
     info = {
         "reference_camera": ref, "assumed_hz": float(out[ref]), "given": given, "noise_px": noise_px,

@@ -111,11 +111,12 @@ def choose_streams(
     table: dict[str, dict] = {}
     noise = {}
     for name, v in views.items():
+        assert v.stream_index is not None  # partial views
         noise[name] = stream_noise_px(v.keypoints_px, v.visible, v.cam_id, v.stream_index)
         table[name] = {"noise_px": noise[name]}
     measured = [s for s in noise.values() if s is not None]
     sigma = min(measured) if measured else None
-    order = sorted(views, key=lambda n: np.inf if noise[n] is None else noise[n])
+    order = sorted(views, key=lambda n: float("inf") if noise[n] is None else float(noise[n]))
     clocks: dict[str, Clocks] = {}
     rates: float | Sequence[float] | Mapping[int, float] | None = fps
     rate_info = None
