@@ -70,6 +70,10 @@ def root_rank(x: np.ndarray) -> np.ndarray:
     return rank
 
 
+def _or_inf(x: float | None) -> float:
+    return float("inf") if x is None else x
+
+
 @dataclass(frozen=True)
 class StreamChoice:
     """The camera streams kept and how every source fared.
@@ -116,7 +120,7 @@ def choose_streams(
         table[name] = {"noise_px": noise[name]}
     measured = [s for s in noise.values() if s is not None]
     sigma = min(measured) if measured else None
-    order = sorted(views, key=lambda n: float("inf") if noise[n] is None else float(noise[n]))
+    order = sorted(views, key=lambda n: _or_inf(noise[n]))
     clocks: dict[str, Clocks] = {}
     rates: float | Sequence[float] | Mapping[int, float] | None = fps
     rate_info = None
