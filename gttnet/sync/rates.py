@@ -157,7 +157,7 @@ def _relative_rate(
     if accept_px is not None and kept[1] <= accept_px:
         return keep_hz, {**row, "estimated_hz": keep_hz, "miss_px": kept[1]}
     prior = ref_hz * st.tau.shape[0] / ref.tau.shape[0]  # right when both filmed the same span
-    thin = _thinned(ref, 64)
+    thin = _thinned(ref, 32)
     coarse = {}
     for r in _candidates(ref_hz, prior, keep_hz):
         try:
