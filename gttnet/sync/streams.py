@@ -12,7 +12,8 @@ source gives a global rank of the images, and each camera's frames are put in th
 
 A wrong order leaves clocks that do not explain the images: each candidate's clocks are recovered and the
 candidate whose clock fit leaves the lowest reprojection residual (among those whose clocks cover at least
-half as many ray pairs as the best covered) is kept (:func:`choose_streams`).
+half as many ray pairs as the best covered, and whose streams do not read as noisier than the others': a
+wrong order adds to the frame-to-frame differences the noise is read from) is kept (:func:`choose_streams`).
 """
 
 from __future__ import annotations
@@ -29,12 +30,38 @@ from gttnet.geometry.noise import stream_noise_px
 from gttnet.sync.clocks import Clocks
 from gttnet.sync.recover import recover_clocks
 
-__all__ = ["ORDER_SOURCES", "StreamChoice", "choose_streams", "root_rank", "view_from_rank"]
+__all__ = [
+    "MISORDERED_NOISE",
+    "ORDER_SOURCES",
+    "StreamChoice",
+    "choose_streams",
+    "expected_clock_rms_px",
+    "root_rank",
+    "view_from_rank",
+]
 
 log = logging.getLogger(__name__)
 
 #: Order sources ``stream-sync`` tries by default (``gttnet`` joins them where GTT-Net is the fallback).
 ORDER_SOURCES = ("pose-graph", "dloe", "root")
+#: A source whose streams' noise estimate exceeds the smallest by this factor is misordered: not kept
+#: (unless every source is).
+MISORDERED_NOISE = 1.25
+#: Right clocks leave a clock-fit RMS of about ``sqrt((a sigma)^2 + b^2)`` pixels at 2-D noise sigma: the
+#: noise seen through two smoothed rays, plus what interpolating between frames misses. Measured on the
+#: paper recipe's test walks at sigma 1 / 2 / 5 px (30 Hz): 0.95 / 1.78 / 3.66 px.
+_RMS_PER_NOISE = 0.72
+_RMS_FLOOR_PX = 0.8
+
+
+def expected_clock_rms_px(noise_px: float) -> float:
+    """The clock-fit RMS right clocks leave at 2-D noise ``noise_px``, pixels.
+
+    Example:
+        >>> round(expected_clock_rms_px(2.0), 2)
+        1.65
+    """
+    return float(np.hypot(_RMS_PER_NOISE * noise_px, _RMS_FLOOR_PX))
 
 
 def view_from_rank(obs: Observations, rank: np.ndarray) -> Observations:
@@ -103,7 +130,8 @@ def choose_streams(
 
     The frame rates are checked (or, without ``fps``, estimated) on the view with the lowest noise estimate
     (the best-ordered streams), then held for the others. Among views whose clock fit covers at least half
-    as many ray pairs as the best covered one, the lowest clock residual relative to the noise wins.
+    as many ray pairs as the best covered one and whose own noise estimate is within
+    :data:`MISORDERED_NOISE` times the smallest, the lowest clock residual wins.
 
     Args:
         views: Candidate ``partial`` views of one capture, by source name.
@@ -139,7 +167,13 @@ def choose_streams(
     if not clocks:
         return StreamChoice(None, None, None, sigma, table)
     most = max(table[n]["n_residuals"] for n in clocks)
-    fair = [n for n in clocks if table[n]["n_residuals"] >= 0.5 * most and table[n]["rms_px"] is not None]
+    fair = [
+        n
+        for n in clocks
+        if table[n]["n_residuals"] >= 0.5 * most
+        and table[n]["rms_px"] is not None
+        and _or_inf(noise[n]) <= MISORDERED_NOISE * _or_inf(sigma)
+    ]
     best = min(fair or list(clocks), key=lambda n: table[n]["rms_px"] or np.inf)
     cl = clocks[best]
     if rate_info is not None:  # the rates were checked on another view: report that check
