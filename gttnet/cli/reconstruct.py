@@ -203,29 +203,42 @@ def _timing_options(method: str, view) -> dict:
     return out
 
 
+class _Held(logging.Handler):
+    """Collect log messages (the clock code's warnings, printed later by camera name)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.lines: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+
 @contextlib.contextmanager
 def _time_warnings_held():
-    """Hold back the clock code's own warning log lines: :func:`_timing_fields` prints them with camera names."""
+    """Hold back the clock code's warning log lines; yields the list they are collected in."""
     sync_log = logging.getLogger("gttnet.sync")
-    held = logging.NullHandler()
+    held = _Held()
     sync_log.addHandler(held)
     try:
-        yield
+        yield held.lines
     finally:
         sync_log.removeHandler(held)
 
 
-def _timing_fields(rec, view, *, quiet: bool) -> dict:
+def _timing_fields(rec, view, *, quiet: bool, held: list[str]) -> dict:
     """Print clock recovery's timing warnings by camera name; return the summary's timing fields.
 
-    The fields, where clocks were recovered: ``frame_rates_hz`` ({name: Hz}) and ``cameras_left_out``
-    ({name: reason}).
+    Where the reconstruction's ``info`` has no timing checks (windows: one recovery per window), the held
+    log lines are printed once each, cameras by index. The fields, where clocks were recovered:
+    ``frame_rates_hz`` ({name: Hz}) and ``cameras_left_out`` ({name: reason}).
     """
     from gttnet.sync.rates import time_warnings
 
     names = dict(enumerate(view.camera_names))
+    lines = time_warnings(rec.info, names) if "time_warnings" in rec.info else list(dict.fromkeys(held))
     if not quiet:
-        for line in time_warnings(rec.info, names):
+        for line in lines:
             click.echo(f"warning: {line}", err=True)
     out: dict[str, Any] = {}
     rates = (rec.info.get("frame_rates") or {}).get("cameras")
@@ -562,6 +575,7 @@ def reconstruct_cmd(
             "interpolates them)",
             err=True,
         )
+    held: list[str] = []
     try:
         if subjects > 1:
             if loaded is None:
@@ -574,17 +588,23 @@ def reconstruct_cmd(
         elif window_arg is not None:
             from gttnet.windowed import reconstruct_windowed
 
-            rec = reconstruct_windowed(
-                obs, method, window=window_arg, progress=progress, **_timing_options(method, view), **options
-            )
+            with _time_warnings_held() as held:
+                rec = reconstruct_windowed(
+                    obs,
+                    method,
+                    window=window_arg,
+                    progress=progress,
+                    **_timing_options(method, view),
+                    **options,
+                )
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
         else:
-            with _time_warnings_held():
+            with _time_warnings_held() as held:
                 rec = reconstruct(obs, method, **_timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
-    summary.update(_timing_fields(rec, view, quiet=quiet))
+    summary.update(_timing_fields(rec, view, quiet=quiet, held=held))
     if blind:
         summary["images_without_joints"] = blind
     if out_paths:
