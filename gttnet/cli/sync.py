@@ -183,8 +183,15 @@ def sync_cmd(
     gt = None
     if Path(input_path).suffix.lower() in (".toml", ".yaml", ".yml"):  # a recording's project file
         from gttdata.recording import Recording, load_project
+        from gttnet.cli.reconstruct import _WarningLines
 
-        view = Recording.load(load_project(input_path)).view("partial", weights=False)
+        rec_log = logging.getLogger("gttdata.recording")  # a camera without usable detections: why
+        lines = _WarningLines(logging.WARNING)
+        rec_log.addHandler(lines)
+        try:
+            view = Recording.load(load_project(input_path)).view("partial", weights=False)
+        finally:
+            rec_log.removeHandler(lines)
         obs, names = view.observations, list(view.camera_names)
     else:
         check_shard_split(input_path, split)
