@@ -163,9 +163,9 @@ def count_rates(cam_id: np.ndarray, top_hz: float = 30.0) -> dict[int, float]:
 
 #: ``stream-sync`` trusts clocks recovered on estimated streams only if their fit's reprojection RMS (the
 #: clock refinement's robust RMS) is within this many times what right clocks leave at the capture's noise
-#: estimate (:func:`gttnet.sync.streams.expected_clock_rms_px`). On the paper recipe's test captures right
-#: clocks leave 0.77-1.09 times that at 1, 2 and 5 px; the wrong ones seen left 1.44 times and more
-#: (``benchmarks/bench_stream_sync_sources.py``).
+#: estimate (:func:`gttnet.sync.streams.expected_clock_rms_px`). On the test captures of docs/METHOD.md's runs
+#: of ``benchmarks/bench_stream_sync_sources.py`` (paper walks, CMU, paper at 1 and 5 px, sync recipe) right
+#: clocks left 0.88-1.09 times that, the wrong ones 1.43 times and more.
 STREAM_SYNC_MAX_RMS_NOISE = 1.3
 #: The gate, pixels, where the noise cannot be measured (streams too short), and the former fixed gate.
 STREAM_SYNC_MAX_RMS_PX = 3.0
