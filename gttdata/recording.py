@@ -35,7 +35,7 @@ import yaml
 from gttdata.calibration import load_calibration, undistort_points
 from gttdata.cameras import CameraRig
 from gttdata.capture.views import SEQUENCING, Observations
-from gttdata.detectors import Keypoints2D, read_keypoints
+from gttdata.detectors import Keypoints2D, candidate_sets, read_keypoints
 from gttdata.errors import CalibrationError, KeypointFormatError, NoDetectionsError
 from gttdata.skeleton import Skeleton, cmu31
 
@@ -257,6 +257,12 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
         sk = Skeleton.from_dict(wanted, source="project skeleton")
     else:
         name = wanted or kset or ("cmu31" if names == cmu31().joint_names else None)
+        if name is None and len(candidate_sets(len(names))) > 1:
+            both = " and ".join(candidate_sets(len(names)))
+            raise KeypointFormatError(
+                f"keypoints: {len(names)} joints fit {both}, which put different joints at the same "
+                "index; name the skeleton (--skeleton, the project's 'skeleton' or Config.toml's pose_model)"
+            )
         if name is None:
             return Skeleton(
                 name=f"detector{len(names)}", joint_names=names, parents=(-1,) + (0,) * (len(names) - 1)
