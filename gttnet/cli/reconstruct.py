@@ -19,7 +19,7 @@ __all__ = ["register", "reconstruct_cmd"]
 log = logging.getLogger(__name__)
 
 
-def _method_fields(rec) -> dict:
+def _method_fields(rec, camera_names=None) -> dict:
     """The method fields of a reconstruction's report.
 
     ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto"),
@@ -36,7 +36,11 @@ def _method_fields(rec) -> dict:
     if "refined" in rec.info:
         out["refined"] = bool(rec.info["refined"])
     if "clock_offsets_s" in rec.info:
-        out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
+        names = list(camera_names or [])
+        out["clock_offsets_s"] = {
+            (names[int(k)] if str(k).isdigit() and int(k) < len(names) else str(k)): round(float(v), 6)
+            for k, v in rec.info["clock_offsets_s"].items()
+        }
     return out
 
 
@@ -93,9 +97,6 @@ def _report(loaded, rec) -> dict:
     return out
 
 
-_PROJECT_SUFFIXES = (".toml", ".yaml", ".yml")
-
-
 def _window_arg(value: str) -> int | str | None:
     """``--window``: ``"auto"``, None for ``off``, or an image count >= 2."""
     if value in ("auto", "off"):
@@ -124,44 +125,35 @@ class _WarningLines(logging.Handler):
         click.echo(f"warning: {record.getMessage()}", err=True)
 
 
-def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
-    """Recording view plus the ground truth an exported project names (scoring only).
-
-    The calibration's unit detection and plausibility warnings become ``warning:`` lines on stderr.
-    """
-    from gttdata.recording import Recording, ground_truth_for
-
-    cal_log = logging.getLogger("gttdata.calibration")
-    handler = _WarningLines(logging.WARNING)
-    cal_log.addHandler(handler)
-    try:
-        rec = Recording.load(spec)
-    finally:
-        cal_log.removeHandler(handler)
-    view = rec.view(
-        sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
-    )
-    gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
-    return rec, view, gt
-
-
-def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json):
+def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json, trc):
+    """Write every ``--out``: .trc/.c3d OpenSim-ready (``trc``: up axis, filter), .csv per image, .h5/.npz."""
     import numpy as np
 
     from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
     from gttnet.io.output import write_reconstruction
+    from gttnet.recording import filter_motion, to_trc_frame, uniform_motion
 
     table = motion_table(rec, view)
     time_s = np.full(rec.n_images, np.nan)
     if table.timed:
         time_s[table.row] = table.time_s
     order_rows = table.row.copy()
-    if resample_hz is not None:
-        table = resample(table, resample_hz)
+    per_image = resample(table, resample_hz) if resample_hz is not None else table
+    opensim = None
     for out in outs:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
         suffix = Path(out).suffix.lower()
-        if suffix in MOTION_SUFFIXES:
-            write_motion(table, out)
+        if suffix in (".trc", ".c3d"):
+            if opensim is None:
+                opensim = uniform_motion(table, resample_hz, view.fps)
+                if trc["filter"] is not None:
+                    opensim = filter_motion(opensim, *trc["filter"])
+                if trc["names"] is not None:
+                    opensim = dataclasses.replace(opensim, joint_names=trc["names"])
+            up = trc["up"] if suffix == ".trc" else "z"
+            write_motion(dataclasses.replace(opensim, points3d=to_trc_frame(opensim.points3d, up)), out)
+        elif suffix in MOTION_SUFFIXES:
+            write_motion(per_image, out)
         else:
             write_reconstruction(
                 rec,
@@ -227,35 +219,36 @@ def _resolve_input(
     units,
     seed,
     split=None,
+    skeleton=None,
 ) -> dict:
-    """The run's input: a recording (calibration + keypoints, or a project file) or one INPUT file."""
-    is_project = (
-        calibration is None
-        and len(input_paths) == 1
-        and Path(input_paths[0]).suffix.lower() in _PROJECT_SUFFIXES
-    )
-    if calibration is not None or is_project or keypoints:
-        from gttdata.recording import load_project
-        from gttnet.io.recording_input import spec_from_options, spec_to_json
+    """The run's input: a recording (calibration + keypoints, project file, Pose2Sim/anipose folder) or a file."""
+    from gttnet.recording import load_view, recording_spec
 
-        if is_project:
-            spec = load_project(input_paths[0])
-            if calibration_units is not None:
-                spec = dataclasses.replace(spec, calibration_units=calibration_units)
-        else:
-            if calibration is None:
-                raise click.UsageError("--keypoints needs --calibration (or give a project file as INPUT)")
-            spec = spec_from_options(
-                calibration,
-                list(keypoints) + list(input_paths),
-                fps=tuple(fps),
-                timestamps=tuple(timestamps),
-                clock=clock,
-                calibration_units=calibration_units,
+    spec = recording_spec(
+        input_paths,
+        calibration=calibration,
+        keypoints=keypoints,
+        fps=fps,
+        timestamps=timestamps,
+        clock=clock,
+        calibration_units=calibration_units,
+        min_confidence=min_confidence,
+        skeleton=skeleton,
+    )
+    if spec is not None:
+        from gttnet.io.recording_input import spec_to_json
+
+        handler = _WarningLines(logging.WARNING)
+        loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttdata.recording_folders")]
+        for lg in loggers:
+            lg.addHandler(handler)
+        try:
+            recording, view, gt = load_view(
+                spec, sequencing, min_confidence=min_confidence, weights=weights, seed=seed or 0
             )
-        if min_confidence is not None:
-            spec = dataclasses.replace(spec, min_confidence=min_confidence)
-        _, view, gt = _load_recording(spec, sequencing, min_confidence, seed, weights)
+        finally:
+            for lg in loggers:
+                lg.removeHandler(handler)
         return {
             "loaded": None,
             "view": view,
@@ -263,6 +256,7 @@ def _resolve_input(
             "source": str(spec.calibration),
             "image_index": view.image_index,
             "recording_json": spec_to_json(spec),
+            "skeleton": recording.skeleton,
         }
     if len(input_paths) != 1:
         raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
@@ -318,9 +312,16 @@ def _resolve_input(
 )
 @click.option(
     "--fps",
-    type=float,
     multiple=True,
-    help="Frame rate, Hz: once for every camera or once per camera, in order.",
+    metavar="HZ",
+    help="Frame rate, Hz: one for every camera ('30'), one per camera in order ('25,30,60' or the option "
+    "repeated) or by camera ('cam_0=25,cam_2=60') [default: the project's, Config.toml's or the videos'].",
+)
+@click.option(
+    "--skeleton",
+    default=None,
+    help="Keypoint set of the detections (BODY_25B, BODY_25, HALPE_26, COCO_133, BLAZEPOSE... docs/SKELETONS.md) "
+    "[default: the project's or Config.toml's pose_model, else recognised from the joint count].",
 )
 @click.option(
     "--timestamps",
@@ -391,11 +392,27 @@ def _resolve_input(
 )
 @click.option("--overwrite", is_flag=True, help="Replace existing --out files.")
 @click.option(
+    "--up",
+    type=click.Choice(["y", "z"]),
+    default="y",
+    show_default=True,
+    help="Up axis of a .trc (y: OpenSim's and Pose2Sim's, X Y Z = world y z x; z: the world's).",
+)
+@click.option(
+    "--filter",
+    "filter_spec",
+    default=None,
+    metavar="KIND:VALUE",
+    help="Low-pass the uniform .trc/.c3d result: butterworth:HZ (zero-phase, cut-off), gaussian:SIGMA_FRAMES "
+    "or median:WINDOW_FRAMES.",
+)
+@click.option(
     "--resample",
     "resample_hz",
     type=click.FloatRange(min=0.0, min_open=True),
     default=None,
-    help="Interpolate .trc/.c3d/.csv outputs onto this uniform rate, Hz (needs times).",
+    help="Uniform rate of the outputs, Hz (needs times): .trc/.c3d default to the fastest camera's rate, "
+    ".csv to one row per image.",
 )
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object with the run's summary on stdout."
@@ -436,6 +453,7 @@ def reconstruct_cmd(
     calibration,
     keypoints,
     fps,
+    skeleton,
     timestamps,
     clock,
     calibration_units,
@@ -450,6 +468,8 @@ def reconstruct_cmd(
     units,
     out_paths,
     overwrite,
+    up,
+    filter_spec,
     resample_hz,
     as_json,
     model_path,
@@ -486,6 +506,9 @@ def reconstruct_cmd(
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--method") from exc
     _check_outs(out_paths, overwrite)
+    from gttnet.recording import parse_filter
+
+    trc = {"up": up, "filter": parse_filter(filter_spec), "names": None}
     options = _gttnet_options(method, model_path, refine)
     inp = _resolve_input(
         input_paths,
@@ -504,6 +527,7 @@ def reconstruct_cmd(
         units=units,
         seed=seed,
         split=split,
+        skeleton=skeleton,
     )
     loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
     progress = progress and not quiet
@@ -555,14 +579,31 @@ def reconstruct_cmd(
                 image_index=inp["image_index"],
                 source=inp["source"],
                 recording_json=inp["recording_json"],
+                trc=trc | {"names": _marker_names(inp.get("skeleton"), obs)},
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
     if as_json:
         click.echo(json.dumps(summary))
         return
-    parts = [f"{k}={v}" for k, v in summary.items()]
+    parts = [f"{k}={_plain(v)}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+
+
+def _plain(value) -> str:
+    """A summary value for people: ``cam_0:0.1,cam_1:-0.03`` for a dict, ``1,4`` for a list."""
+    if isinstance(value, dict):
+        return ",".join(f"{k}:{_plain(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ",".join(_plain(v) for v in value)
+    return str(value)
+
+
+def _marker_names(skeleton, obs) -> tuple[str, ...]:
+    """Pose2Sim's marker names of the recording's skeleton (or the observations')."""
+    from gttdata.skeletons_detectors import trc_marker_names
+
+    return trc_marker_names(skeleton if skeleton is not None else obs.skeleton)
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
@@ -594,7 +635,7 @@ def _report_recording(view, rec, gt_points) -> dict:
     }
     if "windows" in rec.info:
         out["windows"] = rec.info["windows"]
-    out.update(_method_fields(rec))
+    out.update(_method_fields(rec, view.camera_names))
     if gt_points is not None:
         out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt_points), 4)
     return out
