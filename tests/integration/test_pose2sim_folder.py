@@ -1,0 +1,94 @@
+"""A Pose2Sim-like trial folder reconstructs with no other argument into an OpenSim-ready TRC.
+
+The session is simulated (tests/integration/_pose2sim_trial.py): Config.toml (frame rate, BODY_25B), a
+calibration whose cameras are ``cam_01``... beside folders ``cam01_json``..., frames with ``"people": [{}]``.
+An unsynchronized copy (cameras started 7, 3 and 12 frames late) must give the same motion and offsets
+that differ by exactly those frames.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gttdata.skeletons_detectors import BODY25B_JOINTS
+from gttnet.cli import main
+from gttnet.io.motion_files import read_trc
+from tests.integration._pose2sim_trial import FPS, body25b_walk, write_session
+
+pytestmark = pytest.mark.integration
+
+DROP = (0, 7, 3, 12)
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    root = tmp_path_factory.mktemp("p2s")
+    trial, _, _ = write_session(root / "synced")
+    late, _, _ = write_session(root / "late", drop=DROP)
+    return trial, late
+
+
+def _run(*args):
+    res = CliRunner().invoke(main, ["reconstruct", *map(str, args)])
+    assert res.exit_code == 0, res.output
+    return res
+
+
+def test_trial_folder_alone_gives_an_opensim_trc(sessions, tmp_path):
+    trial, _ = sessions
+    out = tmp_path / "new" / "r.trc"  # --out creates its folder
+    _run(trial, "--out", out)
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("PathFileType\t4\t(X/Y/Z)\t")
+    header = dict(zip(lines[1].split("\t"), lines[2].split("\t"), strict=True))
+    names, t, P, units = read_trc(out)
+    assert names == BODY25B_JOINTS and units == "m"
+    assert float(header["DataRate"]) == FPS and float(header["CameraRate"]) == FPS
+    assert int(header["NumFrames"]) == t.shape[0] == P.shape[0] and int(header["NumMarkers"]) == 25
+    assert [int(r.split("\t")[0]) for r in lines[6:]] == list(range(1, t.shape[0] + 1))
+    np.testing.assert_allclose(np.diff(t), 1 / FPS, atol=1e-9)  # one row per frame, no repeated time
+    head, ankle = names.index("Head"), names.index("LAnkle")
+    assert np.nanmedian(P[:, head, 1]) - np.nanmedian(P[:, ankle, 1]) > 1.2  # Y up
+    # Against the simulated walk at the TRC's times (cam_01's clock: frame k at k / 30 s).
+    X = body25b_walk()[np.rint(t * 120).astype(int)][..., [1, 2, 0]]
+    err = np.linalg.norm(P - X, axis=-1)
+    assert np.nanmedian(err) < 0.02, np.nanmedian(err)
+
+
+def test_unsynchronized_copy_gives_the_same_motion_and_its_offsets(sessions, tmp_path):
+    trial, late = sessions
+    got = {}
+    for name, folder in (("synced", trial), ("late", late)):
+        res = _run(folder, "--out", tmp_path / f"{name}.trc", "--json")
+        got[name] = (json.loads(res.stdout.strip().splitlines()[-1]), read_trc(tmp_path / f"{name}.trc"))
+    offsets = {k: np.array(list(v[0]["clock_offsets_s"].values())) for k, v in got.items()}
+    assert list(got["late"][0]["clock_offsets_s"]) == ["cam_01", "cam_02", "cam_03", "cam_04"]
+    shift = (offsets["late"] - offsets["synced"]) * FPS
+    np.testing.assert_array_less(np.abs(shift - np.array(DROP)), 0.25)
+    (_, ta, A, _), (_, tb, B, _) = got["synced"][1], got["late"][1]
+    n = min(ta.shape[0], tb.shape[0])
+    np.testing.assert_allclose(ta[:n], tb[:n], atol=1e-6)
+    assert np.nanmedian(np.linalg.norm(A[:n] - B[:n], axis=-1)) < 0.010
+
+
+def test_filter_up_and_skeleton_options(sessions, tmp_path):
+    trial, _ = sessions
+    _run(trial, "--out", tmp_path / "z.trc", "--up", "z", "--filter", "butterworth:6")
+    _run(trial, "--out", tmp_path / "y.trc")
+    _, _, Z, _ = read_trc(tmp_path / "z.trc")
+    _, _, Y, _ = read_trc(tmp_path / "y.trc")
+    d = np.linalg.norm(Z[..., [1, 2, 0]] - Y, axis=-1)
+    assert 0 < np.nanmedian(d) < 0.01  # same motion, smoothed, in the other frame
+    res = CliRunner().invoke(
+        main, ["reconstruct", str(trial), "--skeleton", "BODY_25", "--out", str(tmp_path / "b.trc")]
+    )
+    assert res.exit_code == 0, res.output
+    assert read_trc(tmp_path / "b.trc")[0][8] == "CHip"  # told BODY_25: its names, Pose2Sim's CHip
+    res = CliRunner().invoke(
+        main, ["reconstruct", str(trial), "--fps", "30", "30", "--out", str(tmp_path / "c.trc")]
+    )
+    assert res.exit_code == 1 and "--fps 25,30,60" in res.output and len(res.output.strip().splitlines()) == 1
