@@ -153,7 +153,6 @@ def recording_spec(
             f"inputs {', '.join(stray)} look like frame rates: give one rate per camera as --fps 25,30,60 "
             "(or --fps 25 --fps 30 --fps 60)"
         )
-    rates = parse_fps(fps)
     one = len(inputs) == 1 and calibration is None and not keypoints
     if one and Path(inputs[0]).suffix.lower() in (".toml", ".yaml", ".yml") and Path(inputs[0]).is_file():
         spec = load_project(inputs[0])
@@ -167,7 +166,7 @@ def recording_spec(
         )
     else:
         return None
-    spec = apply_fps(spec, rates)
+    spec = apply_fps(spec, parse_fps(fps))
     changes: dict[str, Any] = {}
     if calibration_units is not None:
         changes["calibration_units"] = calibration_units

@@ -92,3 +92,42 @@ def test_filter_up_and_skeleton_options(sessions, tmp_path):
         main, ["reconstruct", str(trial), "--fps", "30", "30", "--out", str(tmp_path / "c.trc")]
     )
     assert res.exit_code == 1 and "--fps 25,30,60" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_sync_takes_the_folder_or_calibration_and_keypoints(sessions, tmp_path):
+    """``gttnet sync`` reads recordings as ``reconstruct`` does, with the same ``--fps`` forms."""
+    _, late = sessions
+    res = CliRunner().invoke(main, ["sync", str(late), "--out", str(tmp_path / "a.json"), "--json"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout.strip().splitlines()[-1])["cameras"]
+    assert [r["name"] for r in rows] == ["cam_01", "cam_02", "cam_03", "cam_04"]
+    a = np.array([r["offset_s"] for r in rows])
+    session = late.parents[1]
+    sources = [f"cam_{v:02d}={late / 'pose' / f'cam{v:02d}_json'}" for v in range(1, 5)]
+    args = [
+        "--calibration",
+        str(session / "calibration" / "Calib_scene.toml"),
+        "--keypoints",
+        *sources,
+        "--skeleton",
+        "BODY_25B",
+    ]
+    for fps in (
+        ["--fps", "30,30,30,30"],
+        ["--fps", "30"],
+        ["--fps", "cam_01=30,cam_02=30,cam_03=30,cam_04=30"],
+    ):
+        out = tmp_path / f"b{len(fps[1])}.json"
+        res = CliRunner().invoke(main, ["sync", *args, *fps, "--out", str(out), "--json"])
+        assert res.exit_code == 0, res.output
+        b = np.array([r["offset_s"] for r in json.loads(res.stdout.strip().splitlines()[-1])["cameras"]])
+        np.testing.assert_allclose(b - b[0], a - a[0], atol=1e-9)
+    res = CliRunner().invoke(main, ["sync", *args, "--fps", "30,30", "--out", str(tmp_path / "c.json")])
+    assert res.exit_code == 1 and "one per camera (4" in res.output
+
+
+def test_human_summary_names_cameras_plainly(sessions, tmp_path):
+    _, late = sessions
+    res = _run(late, "--method", "sync", "--out", tmp_path / "h.trc")
+    line = res.stdout.strip().splitlines()[-1]
+    assert "clock_offsets_s=cam_01:0.0,cam_02:" in line and "{" not in line and "'" not in line
