@@ -33,11 +33,14 @@ __all__ = [
     "apply_fps",
     "filter_motion",
     "load_view",
+    "marker_names",
     "parse_fps",
     "parse_filter",
     "recording_spec",
     "to_trc_frame",
+    "timing_options",
     "uniform_motion",
+    "write_outputs",
 ]
 
 log = logging.getLogger(__name__)
@@ -292,3 +295,81 @@ def filter_motion(table, kind: str, value: float):
                 w = int(np.ceil(value)) | 1
                 X[s:e, j] = ndimage.median_filter(seg, size=(w, 1), mode="nearest")
     return dataclasses.replace(table, points3d=X)
+
+
+def write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json, trc):
+    """Write every output of a reconstruction ``rec`` of ``view``; the suffix picks the layout.
+
+    ``.trc``/``.c3d``: OpenSim-ready (:func:`uniform_motion`, then ``trc["filter"]`` (kind, value) or None,
+    marker names ``trc["names"]``, ``.trc`` in ``trc["up"]``); ``.csv``: one row per image in time order
+    (resampled onto ``resample_hz`` when given); ``.h5``/``.npz``: the reconstruction with the recording's
+    per-image arrays. Parent folders are created.
+    """
+    import json
+
+    from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
+    from gttnet.io.output import write_reconstruction
+
+    table = motion_table(rec, view)
+    time_s = np.full(rec.n_images, np.nan)
+    if table.timed:
+        time_s[table.row] = table.time_s
+    order_rows = table.row.copy()
+    per_image = resample(table, resample_hz) if resample_hz is not None else table
+    opensim = None
+    for out in outs:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        suffix = Path(out).suffix.lower()
+        if suffix in (".trc", ".c3d"):
+            if opensim is None:
+                opensim = uniform_motion(table, resample_hz, view.fps)
+                if trc["filter"] is not None:
+                    opensim = filter_motion(opensim, *trc["filter"])
+                if trc["names"] is not None:
+                    opensim = dataclasses.replace(opensim, joint_names=trc["names"])
+            up = trc["up"] if suffix == ".trc" else "z"
+            write_motion(dataclasses.replace(opensim, points3d=to_trc_frame(opensim.points3d, up)), out)
+        elif suffix in MOTION_SUFFIXES:
+            write_motion(per_image, out)
+        else:
+            write_reconstruction(
+                rec,
+                out,
+                image_index=image_index,
+                source=source,
+                extra={
+                    "cam_id": view.observations.cam_id.astype(np.int64),
+                    "frame": np.asarray(view.frame, dtype=np.int64),
+                    "time_s": time_s,
+                    "time_order": order_rows,
+                },
+                extra_attrs={
+                    "camera_names": json.dumps(list(view.camera_names)),
+                    "recording": recording_json,
+                },
+            )
+
+
+def timing_options(method: str, view) -> dict:
+    """Known per-camera timing for methods that take it (clock recovery: ``frame_times_s``, ``fps``)."""
+    import inspect
+
+    import numpy as np
+
+    from gttnet.methods import method_spec
+
+    params = inspect.signature(method_spec(method).fn).parameters
+    obs, out = view.observations, {}
+    if "frame_times_s" in params and obs.stream_time_s is not None:
+        out["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
+    fps = np.asarray(view.fps, dtype=np.float64)
+    if "fps" in params and fps.size and np.all(np.isfinite(fps)):
+        out["fps"] = fps.tolist()
+    return out
+
+
+def marker_names(skeleton, obs) -> tuple[str, ...]:
+    """Pose2Sim's marker names of the recording's skeleton (or the observations')."""
+    from gttdata.skeletons_detectors import trc_marker_names
+
+    return trc_marker_names(skeleton if skeleton is not None else obs.skeleton)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -123,72 +122,6 @@ class _WarningLines(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         click.echo(f"warning: {record.getMessage()}", err=True)
-
-
-def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json, trc):
-    """Write every ``--out``: .trc/.c3d OpenSim-ready (``trc``: up axis, filter), .csv per image, .h5/.npz."""
-    import numpy as np
-
-    from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
-    from gttnet.io.output import write_reconstruction
-    from gttnet.recording import filter_motion, to_trc_frame, uniform_motion
-
-    table = motion_table(rec, view)
-    time_s = np.full(rec.n_images, np.nan)
-    if table.timed:
-        time_s[table.row] = table.time_s
-    order_rows = table.row.copy()
-    per_image = resample(table, resample_hz) if resample_hz is not None else table
-    opensim = None
-    for out in outs:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        suffix = Path(out).suffix.lower()
-        if suffix in (".trc", ".c3d"):
-            if opensim is None:
-                opensim = uniform_motion(table, resample_hz, view.fps)
-                if trc["filter"] is not None:
-                    opensim = filter_motion(opensim, *trc["filter"])
-                if trc["names"] is not None:
-                    opensim = dataclasses.replace(opensim, joint_names=trc["names"])
-            up = trc["up"] if suffix == ".trc" else "z"
-            write_motion(dataclasses.replace(opensim, points3d=to_trc_frame(opensim.points3d, up)), out)
-        elif suffix in MOTION_SUFFIXES:
-            write_motion(per_image, out)
-        else:
-            write_reconstruction(
-                rec,
-                out,
-                image_index=image_index,
-                source=source,
-                extra={
-                    "cam_id": view.observations.cam_id.astype(np.int64),
-                    "frame": np.asarray(view.frame, dtype=np.int64),
-                    "time_s": time_s,
-                    "time_order": order_rows,
-                },
-                extra_attrs={
-                    "camera_names": json.dumps(list(view.camera_names)),
-                    "recording": recording_json,
-                },
-            )
-
-
-def _timing_options(method: str, view) -> dict:
-    """Known per-camera timing for methods that take it (clock recovery: ``frame_times_s``, ``fps``)."""
-    import inspect
-
-    import numpy as np
-
-    from gttnet.methods import method_spec
-
-    params = inspect.signature(method_spec(method).fn).parameters
-    obs, out = view.observations, {}
-    if "frame_times_s" in params and obs.stream_time_s is not None:
-        out["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
-    fps = np.asarray(view.fps, dtype=np.float64)
-    if "fps" in params and fps.size and np.all(np.isfinite(fps)):
-        out["fps"] = fps.tolist()
-    return out
 
 
 def _check_outs(out_paths, overwrite: bool) -> None:
@@ -495,6 +428,7 @@ def reconstruct_cmd(
       gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
     from gttnet.methods import check_sequencing, method_spec, reconstruct
+    from gttnet.recording import marker_names, timing_options, write_outputs
 
     method = method or _method_default()
     if subjects > 1 and method == "auto":
@@ -559,11 +493,11 @@ def reconstruct_cmd(
             from gttnet.windowed import reconstruct_windowed
 
             rec = reconstruct_windowed(
-                obs, method, window=window_arg, progress=progress, **_timing_options(method, view), **options
+                obs, method, window=window_arg, progress=progress, **timing_options(method, view), **options
             )
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
         else:
-            rec = reconstruct(obs, method, **_timing_options(method, view), **options)
+            rec = reconstruct(obs, method, **timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
@@ -571,7 +505,7 @@ def reconstruct_cmd(
         summary["images_without_joints"] = blind
     if out_paths:
         try:
-            _write_outputs(
+            write_outputs(
                 rec,
                 view,
                 out_paths,
@@ -579,7 +513,7 @@ def reconstruct_cmd(
                 image_index=inp["image_index"],
                 source=inp["source"],
                 recording_json=inp["recording_json"],
-                trc=trc | {"names": _marker_names(inp.get("skeleton"), obs)},
+                trc=trc | {"names": marker_names(inp.get("skeleton"), obs)},
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
@@ -597,13 +531,6 @@ def _plain(value) -> str:
     if isinstance(value, list | tuple):
         return ",".join(_plain(v) for v in value)
     return str(value)
-
-
-def _marker_names(skeleton, obs) -> tuple[str, ...]:
-    """Pose2Sim's marker names of the recording's skeleton (or the observations')."""
-    from gttdata.skeletons_detectors import trc_marker_names
-
-    return trc_marker_names(skeleton if skeleton is not None else obs.skeleton)
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
