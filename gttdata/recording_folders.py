@@ -72,7 +72,7 @@ def is_recording_folder(path: str | Path) -> bool:
         return False
     if _is_trial(path) or _is_anipose(path):
         return True
-    return (path / "Config.toml").is_file() and bool(_trials(path))
+    return bool(_trials(path))
 
 
 def _trials(path: Path, depth: int = 2) -> list[Path]:
@@ -103,11 +103,12 @@ def _merge(base: dict, over: dict) -> dict:
 
 
 def _config_chain(trial: Path, name: str = "Config.toml") -> tuple[dict, list[Path]]:
-    """The merged configuration of ``trial`` (deepest wins) and the folders from the top one down."""
-    folders = [trial]
-    while (folders[-1].parent / name).is_file() and folders[-1].parent != folders[-1]:
-        folders.append(folders[-1].parent)
-    folders.reverse()
+    """The merged configuration of ``trial`` (deepest wins) and the folders searched, top one first.
+
+    The trial, its participant and its session folder are searched (Pose2Sim's three levels; a level
+    without a ``Config.toml`` is skipped).
+    """
+    folders = [trial, trial.parent, trial.parent.parent][::-1]
     cfg: dict = {}
     for f in folders:
         if (f / name).is_file():
@@ -203,14 +204,7 @@ def _pose2sim_spec(path: Path) -> RecordingSpec:
     sources = sorted((p for p in pose.iterdir() if p.is_dir()), key=lambda p: _natural_key(p.name))
     if not sources:
         raise KeypointFormatError(f"{pose}: no camera folders (cam01_json, ...) in it")
-    calib = _calibration_file(folders)
-    rig, _ = load_calibration(calib, warn=False)
-    pairs = _match([c.name for c in rig.cameras], sources, None, pose)
     rate = _rate_value((cfg.get("project") or {}).get("frame_rate"), f"{trial}/Config.toml [project]")
-    cams = []
-    for name, src in pairs:
-        fps = rate if rate is not None else _video_rate(trial / "videos", _number(src.name))
-        cams.append(CameraInput(name=name, keypoints=src, fps=fps))
     model = (cfg.get("pose") or {}).get("pose_model")
     skeleton = None
     if model is not None:
@@ -220,6 +214,13 @@ def _pose2sim_spec(path: Path) -> RecordingSpec:
             skeleton = pose2sim_model(str(model))
         except KeyError as exc:
             raise KeypointFormatError(f"{trial}: Config.toml [pose] pose_model: {exc.args[0]}") from None
+    calib = _calibration_file(folders)
+    rig, _ = load_calibration(calib, warn=False)
+    pairs = _match([c.name for c in rig.cameras], sources, None, pose)
+    cams = []
+    for name, src in pairs:
+        fps = rate if rate is not None else _video_rate(trial / "videos", _number(src.name))
+        cams.append(CameraInput(name=name, keypoints=src, fps=fps))
     conf = (cfg.get("triangulation") or {}).get("likelihood_threshold_triangulation")
     return RecordingSpec(
         calibration=calib,
