@@ -31,6 +31,7 @@ __all__ = [
     "FILTERS",
     "UP_AXES",
     "apply_fps",
+    "export_retimed_keypoints",
     "filter_motion",
     "load_view",
     "marker_names",
@@ -373,3 +374,59 @@ def marker_names(skeleton, obs) -> tuple[str, ...]:
     from gttdata.skeletons_detectors import trc_marker_names
 
     return trc_marker_names(skeleton if skeleton is not None else obs.skeleton)
+
+
+def export_retimed_keypoints(
+    recording, view, time_s: np.ndarray, rate_hz: float, out_dir: str | Path
+) -> Path:
+    """Each camera's detections re-timed onto one clock, as OpenPose JSON folders (``<camera>_json``).
+
+    Pose2Sim's or anipose's triangulation, which needs synchronized frames, can run on them. Frame ``k``
+    of every folder is at ``t0 + k / rate_hz`` on the common clock (``t0`` the first image's time). Each
+    joint's pixel and score are linear in time between the two detections of its camera around that
+    instant; a joint is missing (``0, 0, 0``) where its camera did not detect it within 2.5 of its frame
+    periods on each side. Pixels are the detector's own (lens distortion kept): the calibration still
+    applies to them.
+
+    Args:
+        recording: The :class:`~gttdata.recording.Recording` that ``view`` was made from.
+        view: The view reconstructed.
+        time_s: Each view image's time on the common clock (recovered or shared), shape ``(N,)``.
+        rate_hz: Rate of the common frames, Hz.
+        out_dir: Folder to write (one subfolder per camera).
+
+    Returns:
+        ``out_dir``.
+    """
+    from gttdata.detectors import Keypoints2D
+    from gttdata.detectors.openpose import write_openpose
+
+    out = Path(out_dir)
+    t = np.asarray(time_s, dtype=np.float64)
+    t0, t1 = float(np.nanmin(t)), float(np.nanmax(t))
+    grid = t0 + np.arange(int(np.floor((t1 - t0) * rate_hz + 1e-9)) + 1) / rate_hz
+    cam_id = view.observations.cam_id
+    for v, kp in enumerate(recording.keypoints):
+        rows = np.flatnonzero(cam_id == v)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        pos = np.searchsorted(kp.frame, view.frame[rows])
+        tv, xy, sc = t[rows], kp.xy[pos], kp.score[pos]
+        rate_v = float(view.fps[v]) if np.isfinite(view.fps[v]) else (rows.size - 1) / max(np.ptp(tv), 1e-9)
+        gxy = np.full((grid.shape[0], kp.n_joints, 2), np.nan)
+        gsc = np.full((grid.shape[0], kp.n_joints), np.nan)
+        for j in range(kp.n_joints):
+            ok = np.isfinite(sc[:, j]) & np.all(np.isfinite(xy[:, j]), axis=1)
+            if ok.sum() < 2:
+                continue
+            ft = tv[ok]
+            k = np.clip(np.searchsorted(ft, grid), 1, ft.size - 1)
+            near = (grid >= ft[0]) & (grid <= ft[-1]) & (ft[k] - ft[k - 1] <= 2.5 / rate_v)
+            for a in range(2):
+                gxy[near, j, a] = np.interp(grid[near], ft, xy[ok, j, a])
+            gsc[near, j] = np.interp(grid[near], ft, sc[ok, j])
+        name = view.camera_names[v]
+        retimed = Keypoints2D(
+            xy=gxy, score=gsc, frame=np.arange(grid.shape[0]), joint_names=kp.joint_names, source=name
+        )
+        write_openpose(retimed, out / f"{name}_json", prefix=name)
+    return out

@@ -190,6 +190,7 @@ def _resolve_input(
             "image_index": view.image_index,
             "recording_json": spec_to_json(spec),
             "skeleton": recording.skeleton,
+            "recording": recording,
         }
     if len(input_paths) != 1:
         raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
@@ -325,6 +326,13 @@ def _resolve_input(
 )
 @click.option("--overwrite", is_flag=True, help="Replace existing --out files.")
 @click.option(
+    "--export-keypoints",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Also write each camera's 2-D keypoints re-timed onto the common clock (the .trc's frames) as "
+    "OpenPose JSON folders, for Pose2Sim's or anipose's triangulation (needs times).",
+)
+@click.option(
     "--up",
     type=click.Choice(["y", "z"]),
     default="y",
@@ -401,6 +409,7 @@ def reconstruct_cmd(
     units,
     out_paths,
     overwrite,
+    export_keypoints,
     up,
     filter_spec,
     resample_hz,
@@ -517,11 +526,36 @@ def reconstruct_cmd(
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
+    if export_keypoints is not None:
+        _export_keypoints(inp, rec, view, resample_hz, export_keypoints, overwrite)
     if as_json:
         click.echo(json.dumps(summary))
         return
     parts = [f"{k}={_plain(v)}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+
+
+def _export_keypoints(inp, rec, view, resample_hz, folder, overwrite: bool) -> None:
+    """``--export-keypoints``: the recording's detections on the common clock (OpenPose JSON folders)."""
+    import numpy as np
+
+    from gttnet.io.motion_files import motion_table
+    from gttnet.recording import export_retimed_keypoints
+
+    if inp.get("recording") is None:
+        raise click.UsageError("--export-keypoints applies to recordings (2-D keypoint files)")
+    if Path(folder).exists() and any(Path(folder).iterdir()) and not overwrite:
+        raise click.ClickException(f"{folder}: exists and is not empty; pass --overwrite to write into it")
+    table = motion_table(rec, view)
+    if not table.timed:
+        raise click.ClickException(
+            "--export-keypoints needs times: timestamps on a shared clock or a method that recovers clocks (sync)"
+        )
+    t = np.empty(rec.n_images)
+    t[table.row] = table.time_s
+    fps = np.asarray(view.fps, dtype=np.float64)
+    rate = resample_hz or (float(np.nanmax(fps)) if np.any(np.isfinite(fps)) else table.rate_hz)
+    export_retimed_keypoints(inp["recording"], view, t, rate, folder)
 
 
 def _plain(value) -> str:
