@@ -23,8 +23,10 @@ A project file (TOML or YAML) makes a run repeatable::
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import logging
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -278,6 +280,26 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
     return sk
 
 
+def _last_number(name: str) -> int | None:
+    m = re.search(r"(\d+)(?!.*\d)", name)
+    return int(m.group(1)) if m else None
+
+
+def _by_number(cam: CameraInput, by_name: dict) -> CameraInput:
+    """``cam`` renamed to the one calibration camera with the same last number (``cam01`` -> ``cam_01``).
+
+    A name the calibration has, or a number no or several calibration cameras share, is kept as it is.
+    """
+    n = _last_number(cam.name)
+    if cam.name in by_name or n is None:
+        return cam
+    same = [k for k in by_name if _last_number(k) == n]
+    if len(same) != 1:
+        return cam
+    log.info("camera %r matched to calibration camera %r by its number", cam.name, same[0])
+    return dataclasses.replace(cam, name=same[0])
+
+
 @dataclass(frozen=True)
 class Recording:
     """A loaded recording.
@@ -326,7 +348,12 @@ class Recording:
         cams, kps, times, fps = [], [], [], []
         empty: list[str] = []
         joint_names = None
+        used: set[str] = set()
         for c in spec.cameras:
+            c = _by_number(c, by_name)
+            if c.name in used:
+                raise KeypointFormatError(f"{c.keypoints}: a second keypoint source for camera {c.name!r}")
+            used.add(c.name)
             if c.name not in by_name:
                 raise CalibrationError(
                     f"{c.keypoints}: camera {c.name!r} is not in calibration {spec.calibration} "

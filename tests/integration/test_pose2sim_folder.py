@@ -158,3 +158,16 @@ def test_retimed_keypoints_are_synchronized_openpose_folders(sessions, tmp_path)
         assert np.isfinite(d).mean() > 0.7  # cameras started up to 12 of 121 frames late lack the first ones
     res = CliRunner().invoke(main, ["reconstruct", str(late), "--export-keypoints", str(out)])
     assert res.exit_code == 1 and "--overwrite" in res.output
+
+
+def test_keypoint_folders_match_calibration_cameras_by_number(sessions, tmp_path):
+    """``--keypoints .../cam01_json`` (camera ``cam01``) is the calibration's ``cam_01``."""
+    trial, _ = sessions
+    cal = trial.parents[1] / "calibration" / "Calib_scene.toml"
+    folders = [trial / "pose" / f"cam{v:02d}_json" for v in (3, 1, 2, 4)]
+    res = _run(
+        "--calibration", cal, "--keypoints", *folders, "--fps", "30", "--skeleton", "body25b", "--method", "sync",
+        "--out", tmp_path / "r.trc", "--json",
+    )  # fmt: skip
+    offsets = json.loads(res.stdout.strip().splitlines()[-1])["clock_offsets_s"]
+    assert list(offsets) == ["cam_03", "cam_01", "cam_02", "cam_04"]
