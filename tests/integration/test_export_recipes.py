@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gttdata.errors import GttDataError
 from gttdata.export import export_capture
 from gttdata.generate_plan import build_sample, n_samples
 from gttdata.recipe import load_recipe
@@ -31,7 +32,11 @@ def test_export_then_read_every_recipe(recipe, tmp_path):
     r = load_recipe(recipe)
     split = next(s for s, n in n_samples(r).items() if n > 0)
     sample = build_sample(r, split, 0)[0]
-    project = export_capture(sample, tmp_path / "rec", fmt="dlc")
+    try:
+        project = export_capture(sample, tmp_path / "rec", fmt="dlc")
+    except GttDataError as exc:  # pan-tilt cameras have no single calibration to export: refused by name
+        assert "moves between images" in str(exc), exc
+        return
     rec = Recording.load(load_project(project))
     view = rec.view("partial", weights=False)
     assert view.observations.n_images == sample.n_images
@@ -51,6 +56,7 @@ def test_export_then_read_every_recipe(recipe, tmp_path):
         np.testing.assert_allclose(t - t[0], true - true[0], atol=1e-8)
 
 
+@pytest.mark.slow
 def test_cameras_started_early_reconstruct(tmp_path):
     """The sync recipe's capture (cameras started up to 5 s early, 25/30/60 Hz) reconstructs with its clocks."""
     from gttnet.methods import reconstruct
