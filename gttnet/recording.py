@@ -323,6 +323,12 @@ def write_outputs(rec, view, outs, resample_hz, *, image_index, source, recordin
         suffix = Path(out).suffix.lower()
         if suffix in (".trc", ".c3d"):
             if opensim is None:
+                if not table.timed:
+                    log.warning(
+                        "%s: no clock (per-camera times and a method that recovers none): one row per image "
+                        "at ranked times, not a uniform rate; --method sync (or auto) recovers the clocks",
+                        out,
+                    )
                 opensim = uniform_motion(table, resample_hz, view.fps)
                 if trc["filter"] is not None:
                     opensim = filter_motion(opensim, *trc["filter"])

@@ -513,6 +513,8 @@ def reconstruct_cmd(
     if blind:
         summary["images_without_joints"] = blind
     if out_paths:
+        handler = _WarningLines(logging.WARNING)
+        logging.getLogger("gttnet.recording").addHandler(handler)
         try:
             write_outputs(
                 rec,
@@ -526,6 +528,8 @@ def reconstruct_cmd(
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
+        finally:
+            logging.getLogger("gttnet.recording").removeHandler(handler)
     if export_keypoints is not None:
         _export_keypoints(inp, rec, view, resample_hz, export_keypoints, overwrite)
     if as_json:
