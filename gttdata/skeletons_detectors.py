@@ -259,6 +259,7 @@ POSE2SIM_MODELS: dict[str, str] = {
     "BODY_135": "body135",
     "COCO": "coco18",
     "COCO_17": "coco17",
+    "BODY": "coco17",
     "COCO_133": "coco133",
     "COCO_133_WRIST": "coco133",
     "WHOLE_BODY": "coco133",

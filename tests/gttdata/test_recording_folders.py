@@ -107,3 +107,19 @@ def test_anipose_session(tmp_path):
     (session / "pose-2d" / "run-camA.csv").write_text("x")
     with pytest.raises(KeypointFormatError, match="2 trials"):
         spec_from_folder(session)
+
+
+def test_frame_rate_auto_reads_the_videos(tmp_path):
+    import cv2
+
+    trial = _session(tmp_path)
+    (tmp_path / "Config.toml").write_text('[project]\nframe_rate = "auto"\n')
+    (trial / "videos").mkdir()
+    for v, rate in ((1, 50.0), (2, 25.0), (3, 50.0)):
+        w = cv2.VideoWriter(
+            str(trial / "videos" / f"cam{v:02d}.avi"), cv2.VideoWriter_fourcc(*"MJPG"), rate, (32, 32)
+        )
+        for _ in range(3):
+            w.write(np.zeros((32, 32, 3), np.uint8))
+        w.release()
+    assert [c.fps for c in spec_from_folder(trial).cameras] == [50.0, 25.0, 50.0]

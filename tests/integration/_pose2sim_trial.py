@@ -21,7 +21,7 @@ FPS = 30.0
 N_CAMERAS = 4
 
 
-def body25b_walk(duration_s: float = 4.0) -> np.ndarray:
+def body25b_walk(duration_s: float = 3.0) -> np.ndarray:
     """A walk on BODY_25B's points at 120 Hz, metres, world Z up, shape ``(T, 25, 3)``."""
     walk = generate_motion("walk", seed=3, duration_s=duration_s, fps_hz=120.0)
     return derive_positions(walk.positions, "halpe26")[:, HALPE26_TO_BODY25B]
