@@ -171,3 +171,37 @@ def test_keypoint_folders_match_calibration_cameras_by_number(sessions, tmp_path
     )  # fmt: skip
     offsets = json.loads(res.stdout.strip().splitlines()[-1])["clock_offsets_s"]
     assert list(offsets) == ["cam_03", "cam_01", "cam_02", "cam_04"]
+
+
+def test_anipose_session_folder(tmp_path):
+    """An anipose session (calibration/calibration.toml, pose-2d/<trial>-cam<X>.csv, the project's cam_regex)."""
+    import tomli_w
+
+    from gttdata.calibration import load_calibration, save_calibration
+    from gttdata.cameras import CameraRig
+    from gttdata.export import export_capture
+    from tests.fixtures.scenes import make_scene
+
+    sample = make_scene(n_cameras=3, n_joints=6, frames_per_camera=12, sigma_px=0.5, seed=2)
+    export_capture(sample, tmp_path / "exp", fmt="dlc")
+    project = tmp_path / "project"
+    session = project / "session1"
+    (session / "calibration").mkdir(parents=True)
+    (session / "pose-2d").mkdir()
+    (project / "config.toml").write_text(tomli_w.dumps({"triangulation": {"cam_regex": "-cam([A-Z])"}}))
+    rig, _ = load_calibration(tmp_path / "exp" / "calibration.toml")
+    letters = "ABC"
+    rig = CameraRig(
+        tuple(c.__class__(**{**c.__dict__, "name": letters[v]}) for v, c in enumerate(rig.cameras))
+    )
+    save_calibration(rig, session / "calibration" / "calibration.toml")
+    for v in range(3):
+        (tmp_path / "exp" / f"cam_{v}.csv").rename(session / "pose-2d" / f"trial-cam{letters[v]}.csv")
+    res = _run(session, "--fps", "30", "--method", "sync", "--out", tmp_path / "r.h5", "--json")
+    summary = json.loads(res.stdout.strip().splitlines()[-1])
+    assert summary["n_cameras"] == 3 and list(summary["clock_offsets_s"]) == ["A", "B", "C"]
+    res = CliRunner().invoke(
+        main, ["reconstruct", str(session), "--method", "dloe", "--out", str(tmp_path / "u.trc")]
+    )
+    assert res.exit_code == 0  # no clock recovered: the TRC keeps one row per image, and a warning says so
+    assert "warning:" in res.output and "no clock" in res.output
