@@ -272,7 +272,11 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
         try:
             sk = get_skeleton(name)
         except KeyError as exc:
-            raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
+            from gttdata.skeletons_detectors import POSE2SIM_MODELS, pose2sim_model
+
+            if str(name).strip().upper().replace("-", "_") not in POSE2SIM_MODELS:
+                raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
+            sk = get_skeleton(pose2sim_model(name))  # Pose2Sim's model names: COCO, Body_with_feet...
     if sk.n_joints != len(names):
         raise KeypointFormatError(
             f"skeleton {sk.name!r} has {sk.n_joints} joints but the keypoint sources have {len(names)}"

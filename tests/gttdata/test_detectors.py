@@ -238,6 +238,9 @@ def test_openpose_25_joints_are_never_guessed(tmp_path):
         _skeleton(kp.joint_names, None, kp.keypoint_set)
     assert _skeleton(kp.joint_names, "BODY_25B", "").joint_names[17:19] == ("Neck", "Head")
     assert _skeleton(kp.joint_names, "body25", "").joint_names[8] == "MidHip"
+    assert _skeleton(kp.joint_names[:18], "COCO", "").name == "coco18"  # Pose2Sim's model names too
+    with pytest.raises(KeypointFormatError, match="unknown skeleton 'BODY_99'"):
+        _skeleton(kp.joint_names, "BODY_99", "")
 
 
 def test_openpose_empty_person_is_nobody(tmp_path):
