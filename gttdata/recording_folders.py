@@ -122,7 +122,8 @@ def _calibration_file(folders: list[Path]) -> Path:
         dirs = sorted(d for d in f.iterdir() if d.is_dir() and "calib" in d.name.lower())
         for d in dirs:
             files = sorted(p for p in d.iterdir() if p.is_file() and p.name.lower().endswith(_CALIB_SUFFIXES))
-            tomls = [p for p in files if p.suffix.lower() == ".toml"]
+            tomls = [p for p in files if p.suffix.lower() == ".toml" and p.name.lower() != "config.toml"]
+            tomls.sort(key=lambda p: not p.name.lower().startswith("calib"))  # Pose2Sim's Calib*.toml first
             pick = tomls or [p for p in files if not p.name.startswith("extri")]
             if pick:
                 return pick[0]
