@@ -284,6 +284,18 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
     return sk
 
 
+def _recording_skeleton(names: tuple[str, ...], wanted: str | dict | None, first: Keypoints2D) -> Skeleton:
+    """:func:`_skeleton`, with a DeepLabCut file's limbs read from its project's ``config.yaml`` when found."""
+    sk = _skeleton(names, wanted, first.keypoint_set)
+    if wanted is None and first.fmt == "dlc" and sk.name.startswith("detector"):
+        from gttdata.skeletons_detectors import dlc_project_edges, skeleton_from_edges
+
+        found = dlc_project_edges(first.source)
+        if found is not None:
+            sk = skeleton_from_edges(f"dlc{len(names)}", names, found[1])
+    return sk
+
+
 def _last_number(name: str) -> int | None:
     m = re.search(r"(\d+)(?!.*\d)", name)
     return int(m.group(1)) if m else None
@@ -400,7 +412,7 @@ class Recording:
                 f"no camera has a detection: {empty[0]}"
                 + (f" (and {len(empty) - 1} more)" if len(empty) > 1 else "")
             )
-        sk = _skeleton(joint_names, spec.skeleton, kps[0].keypoint_set)
+        sk = _recording_skeleton(joint_names, spec.skeleton, kps[0])
         return cls(
             rig=CameraRig(tuple(cams)),
             keypoints=tuple(kps),

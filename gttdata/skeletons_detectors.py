@@ -21,13 +21,17 @@ Example:
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from gttdata.skeleton import Skeleton
 
 __all__ = [
     "AMBIGUOUS_COUNTS",
     "DETECTOR_SKELETONS",
     "POSE2SIM_MODELS",
+    "dlc_project_edges",
     "pose2sim_model",
+    "skeleton_from_edges",
     "trc_marker_names",
 ]
 
@@ -332,3 +336,64 @@ def trc_marker_names(skeleton: Skeleton) -> tuple[str, ...]:
     else:
         out = names
     return out if len(set(out)) == len(out) else names
+
+
+def skeleton_from_edges(name: str, joint_names: tuple[str, ...], edges: list[tuple[str, str]]) -> Skeleton:
+    """A topology from a tool's own joint names and limb list (DeepLabCut's ``config.yaml`` ``skeleton``).
+
+    The tree is a breadth-first spanning forest from the first joint (then from the first joint not reached);
+    limbs that would close a cycle are kept as ``extra_bones``. Limbs naming unknown joints are ignored.
+
+    Example:
+        >>> sk = skeleton_from_edges("mouse", ("snout", "ear", "tail"), [("snout", "ear"), ("ear", "tail")])
+        >>> sk.parents
+        (-1, 0, 1)
+    """
+    idx = {n: i for i, n in enumerate(joint_names)}
+    adj: dict[int, list[int]] = {i: [] for i in range(len(joint_names))}
+    pairs = sorted(
+        {(min(idx[a], idx[b]), max(idx[a], idx[b])) for a, b in edges if a in idx and b in idx and a != b}
+    )
+    for a, b in pairs:
+        adj[a].append(b)
+        adj[b].append(a)
+    parents = [-2] * len(joint_names)
+    tree: set[tuple[int, int]] = set()
+    for root in range(len(joint_names)):
+        if parents[root] != -2:
+            continue
+        parents[root] = -1
+        queue = [root]
+        while queue:
+            u = queue.pop(0)
+            for w in adj[u]:
+                if parents[w] == -2:
+                    parents[w] = u
+                    tree.add((min(u, w), max(u, w)))
+                    queue.append(w)
+    extra = tuple(p for p in pairs if p not in tree)
+    return Skeleton(name=name, joint_names=joint_names, parents=tuple(parents), extra_bones=extra)
+
+
+def dlc_project_edges(source: str | Path, levels: int = 3) -> tuple[Path, list[tuple[str, str]]] | None:
+    """The limb list of the DeepLabCut project a keypoint file came from, or None.
+
+    Looks for ``config.yaml`` beside ``source`` and up to ``levels`` folders above, read as data
+    (``yaml.safe_load``); it must hold ``bodyparts`` and a ``skeleton`` list of name pairs.
+    """
+    import yaml
+
+    p = Path(source)
+    for folder in [p.parent, *list(p.parents)[1 : levels + 1]]:
+        cfg = folder / "config.yaml"
+        if not cfg.is_file():
+            continue
+        try:
+            d = yaml.safe_load(cfg.read_text())
+        except (yaml.YAMLError, UnicodeDecodeError, OSError):
+            return None
+        if not isinstance(d, dict) or not isinstance(d.get("skeleton"), list):
+            return None
+        edges = [(str(e[0]), str(e[1])) for e in d["skeleton"] if isinstance(e, list | tuple) and len(e) == 2]
+        return cfg, edges
+    return None

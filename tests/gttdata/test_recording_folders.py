@@ -12,6 +12,7 @@ from gttdata import ring_rig
 from gttdata.calibration import save_calibration
 from gttdata.cameras import CameraRig
 from gttdata.errors import CalibrationError, KeypointFormatError
+from gttdata.recording import CameraInput, RecordingSpec
 from gttdata.recording_folders import is_recording_folder, spec_from_folder
 
 
@@ -123,3 +124,32 @@ def test_frame_rate_auto_reads_the_videos(tmp_path):
             w.write(np.zeros((32, 32, 3), np.uint8))
         w.release()
     assert [c.fps for c in spec_from_folder(trial).cameras] == [50.0, 25.0, 50.0]
+
+
+def test_deeplabcut_project_skeleton_is_read_from_its_config(tmp_path):
+    """A DeepLabCut file's limbs come from its project's config.yaml (read as data)."""
+    import yaml
+
+    from gttdata.detectors import Keypoints2D, write_keypoints
+    from gttdata.recording import Recording
+
+    names = ("snout", "leftear", "rightear", "tailbase")
+    rig = _rig(["cam_0", "cam_1"])
+    save_calibration(rig, tmp_path / "calib.toml")
+    proj = tmp_path / "dlc-project"
+    (proj / "videos").mkdir(parents=True)
+    cfg = {"bodyparts": list(names), "skeleton": [["snout", "leftear"], ["snout", "rightear"],
+                                                 ["leftear", "rightear"], ["snout", "tailbase"]]}  # fmt: skip
+    (proj / "config.yaml").write_text(yaml.safe_dump(cfg))
+    cams = []
+    for v in range(2):
+        kp = Keypoints2D(
+            xy=np.full((3, 4, 2), 500.0), score=np.full((3, 4), 0.9), frame=np.arange(3), joint_names=names
+        )
+        write_keypoints(kp, proj / "videos" / f"cam_{v}DLC_resnet50.csv", "dlc")
+        cams.append(
+            CameraInput(name=f"cam_{v}", keypoints=proj / "videos" / f"cam_{v}DLC_resnet50.csv", fps=30.0)
+        )
+    rec = Recording.load(RecordingSpec(calibration=tmp_path / "calib.toml", cameras=tuple(cams)))
+    assert rec.skeleton.joint_names == names and rec.skeleton.parents == (-1, 0, 0, 0)
+    assert rec.skeleton.extra_bones == ((1, 2),)
