@@ -165,3 +165,9 @@ def test_qca_errors_name_file_and_field(tmp_path):
     (tmp_path / "bad.qca.txt").write_text("<calibration><cameras>")
     with pytest.raises(CalibrationError, match="not a readable XML"):
         load_calibration(tmp_path / "bad.qca.txt")
+
+
+def test_optitrack_calibration_is_refused_by_name(tmp_path):
+    (tmp_path / "cal.mcal").write_text("<calibration/>")
+    with pytest.raises(CalibrationError, match="OptiTrack calibrations are not read"):
+        load_calibration(tmp_path / "cal.mcal")
