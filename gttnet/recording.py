@@ -31,12 +31,14 @@ __all__ = [
     "FILTERS",
     "UP_AXES",
     "apply_fps",
+    "export_keypoints_on_clock",
     "export_retimed_keypoints",
     "filter_motion",
     "load_view",
     "marker_names",
     "parse_fps",
     "parse_filter",
+    "plain",
     "recording_spec",
     "to_trc_frame",
     "timing_options",
@@ -436,3 +438,44 @@ def export_retimed_keypoints(
         )
         write_openpose(retimed, out / f"{name}_json", prefix=name)
     return out
+
+
+def export_keypoints_on_clock(recording, rec, view, folder, *, rate_hz=None, overwrite: bool = False) -> Path:
+    """``--export-keypoints``: :func:`export_retimed_keypoints` at the reconstruction's times.
+
+    The rate is ``rate_hz``, else the fastest camera's, else the result's own.
+
+    Raises:
+        GttNetError: Not a recording, a result without times, or a non-empty ``folder`` without ``overwrite``.
+    """
+    from gttnet.errors import GttNetError
+    from gttnet.io.motion_files import motion_table
+
+    if recording is None:
+        raise GttNetError("--export-keypoints applies to recordings (2-D keypoint files)")
+    if Path(folder).exists() and any(Path(folder).iterdir()) and not overwrite:
+        raise GttNetError(f"{folder}: exists and is not empty; pass --overwrite to write into it")
+    table = motion_table(rec, view)
+    if not table.timed:
+        raise GttNetError(
+            "--export-keypoints needs times: timestamps on a shared clock or a method that recovers clocks (sync)"
+        )
+    t = np.empty(rec.n_images)
+    t[table.row] = table.time_s
+    fps = np.asarray(view.fps, dtype=np.float64)
+    rate = rate_hz or (float(np.nanmax(fps)) if np.any(np.isfinite(fps)) else table.rate_hz)
+    return export_retimed_keypoints(recording, view, t, rate, folder)
+
+
+def plain(value) -> str:
+    """A summary value for people: ``cam_0:0.1,cam_1:-0.03`` for a dict, ``1,4`` for a list.
+
+    Example:
+        >>> plain({"cam_0": 0.0, "cam_1": [1, 2]})
+        'cam_0:0.0,cam_1:1,2'
+    """
+    if isinstance(value, dict):
+        return ",".join(f"{k}:{plain(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ",".join(plain(v) for v in value)
+    return str(value)

@@ -437,7 +437,7 @@ def reconstruct_cmd(
       gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
     from gttnet.methods import check_sequencing, method_spec, reconstruct
-    from gttnet.recording import marker_names, timing_options, write_outputs
+    from gttnet.recording import export_keypoints_on_clock, marker_names, plain, timing_options, write_outputs
 
     method = method or _method_default()
     if subjects > 1 and method == "auto":
@@ -531,44 +531,14 @@ def reconstruct_cmd(
         finally:
             logging.getLogger("gttnet.recording").removeHandler(handler)
     if export_keypoints is not None:
-        _export_keypoints(inp, rec, view, resample_hz, export_keypoints, overwrite)
+        export_keypoints_on_clock(
+            inp.get("recording"), rec, view, export_keypoints, rate_hz=resample_hz, overwrite=overwrite
+        )
     if as_json:
         click.echo(json.dumps(summary))
         return
-    parts = [f"{k}={_plain(v)}" for k, v in summary.items()]
+    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
-
-
-def _export_keypoints(inp, rec, view, resample_hz, folder, overwrite: bool) -> None:
-    """``--export-keypoints``: the recording's detections on the common clock (OpenPose JSON folders)."""
-    import numpy as np
-
-    from gttnet.io.motion_files import motion_table
-    from gttnet.recording import export_retimed_keypoints
-
-    if inp.get("recording") is None:
-        raise click.UsageError("--export-keypoints applies to recordings (2-D keypoint files)")
-    if Path(folder).exists() and any(Path(folder).iterdir()) and not overwrite:
-        raise click.ClickException(f"{folder}: exists and is not empty; pass --overwrite to write into it")
-    table = motion_table(rec, view)
-    if not table.timed:
-        raise click.ClickException(
-            "--export-keypoints needs times: timestamps on a shared clock or a method that recovers clocks (sync)"
-        )
-    t = np.empty(rec.n_images)
-    t[table.row] = table.time_s
-    fps = np.asarray(view.fps, dtype=np.float64)
-    rate = resample_hz or (float(np.nanmax(fps)) if np.any(np.isfinite(fps)) else table.rate_hz)
-    export_retimed_keypoints(inp["recording"], view, t, rate, folder)
-
-
-def _plain(value) -> str:
-    """A summary value for people: ``cam_0:0.1,cam_1:-0.03`` for a dict, ``1,4`` for a list."""
-    if isinstance(value, dict):
-        return ",".join(f"{k}:{_plain(v)}" for k, v in value.items())
-    if isinstance(value, list | tuple):
-        return ",".join(_plain(v) for v in value)
-    return str(value)
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
