@@ -29,6 +29,7 @@ from typing import overload
 import cv2
 import numpy as np
 
+from gttdata.calibration_formats import is_freemocap
 from gttdata.cameras import Camera, CameraRig
 from gttdata.errors import CalibrationError, RigError
 
@@ -153,6 +154,8 @@ def read_toml_calibration(path: str | Path, *, units: str | None = None) -> tupl
         )
     if units is not None and stated is not None and units != stated:
         raise CalibrationError(f"{path}: field 'metadata.units' says {stated!r} but {units!r} was given")
+    if stated is None and is_freemocap(d):  # FreeMoCap measures its ChArUco board in millimetres
+        stated = "mm"
     if units is None and stated is None:
         spread = _spread(_centres(rig))
         units = "mm" if spread > MM_DETECT_SPREAD else "m"
@@ -250,13 +253,35 @@ def read_easymocap(
     return CameraRig(tuple(cams)), units
 
 
+def _fixed_unit_reader(path: Path) -> Callable[[Path], tuple[CameraRig, str]] | None:
+    """The reader of a format whose unit the format fixes (``gttdata.calibration_formats``), or None."""
+    from gttdata import calibration_formats as cf
+
+    name = path.name.lower()
+    if name.endswith((".qca.txt", ".qca")):
+        return cf.read_qca
+    if name.endswith(".xcp"):
+        return cf.read_xcp
+    if name.endswith((".pickle", ".pkl", ".mcal")):
+        return cf.refuse_unreadable  # type: ignore[return-value]
+    if name.endswith(".toml") and path.is_file():
+        try:
+            d = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+            return None  # read_toml_calibration names the parse error
+        if cf.is_caliscope(d):
+            return cf.read_caliscope
+    return None
+
+
 def load_calibration(
     path: str | Path, *, units: str | None = None, warn: bool = True
 ) -> tuple[CameraRig, str]:
     """Read a calibration by its name.
 
-    ``path`` is a ``.toml`` file, an ``intri.yml`` (its ``extri.yml`` next to it)
-    or a folder holding ``intri.yml`` and ``extri.yml``. Logs :func:`check_rig`'s warning when ``warn``.
+    ``path`` is a ``.toml`` file (aniposelib / Pose2Sim / FreeMoCap, or Caliscope's camera array), a
+    Qualisys ``.qca.txt``, a Vicon ``.xcp``, an ``intri.yml`` (its ``extri.yml`` next to it) or a folder
+    holding ``intri.yml`` and ``extri.yml`` (layouts: :mod:`gttdata.calibration_formats`). Logs :func:`check_rig`'s warning when ``warn``.
 
     Returns:
         ``(rig, units)``: cameras in metres and the unit the file was read in.
@@ -264,14 +289,20 @@ def load_calibration(
     path = Path(path)
     if not path.exists():
         raise CalibrationError(f"{path}: calibration file not found")
-    if path.is_dir() or path.name.startswith(("intri", "extri")):
+    fixed = _fixed_unit_reader(path)
+    if fixed is not None:
+        rig, used = fixed(path)
+        if units is not None and units != used:
+            raise CalibrationError(f"{path}: the format states its unit, {used!r}, but {units!r} was given")
+    elif path.is_dir() or path.name.startswith(("intri", "extri")):
         folder = path if path.is_dir() else path.parent
         rig, used = read_easymocap(folder / "intri.yml", folder / "extri.yml", units=units)
     elif path.suffix.lower() == ".toml":
         rig, used = read_toml_calibration(path, units=units)
     else:
         raise CalibrationError(
-            f"{path}: unknown calibration layout; expected .toml (aniposelib/Pose2Sim) or intri.yml/extri.yml"
+            f"{path}: unknown calibration layout; expected .toml (aniposelib/Pose2Sim/FreeMoCap/Caliscope), "
+            ".qca.txt (Qualisys), .xcp (Vicon) or intri.yml/extri.yml (EasyMocap)"
         )
     if warn:
         msg = check_rig(rig, units=used, source=str(path))

@@ -157,6 +157,30 @@ def _remove_previous_export(out: Path) -> None:
         raise write_error(out, exc) from exc
 
 
+def _every_frame_time(frame: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """The time of every frame ``0 .. frame[-1]`` of a camera, shape ``(frame[-1] + 1,)``, seconds.
+
+    A timestamp file has one row per video frame (row k is frame k), but a capture holds only the frames
+    it kept: a camera started before the capture (frames before the first kept one) and dropped frames
+    leave gaps. Kept frames keep their times; gaps are filled on the camera's line ``t = a + b k`` fitted
+    to its kept frames (exact for a camera without jitter).
+
+    Args:
+        frame: Kept frame numbers, shape ``(F,)``, increasing.
+        time_s: Their times, shape ``(F,)``.
+    """
+    k = np.arange(int(frame[-1]) + 1)
+    if frame.shape[0] > 1:
+        b, a = np.polyfit(frame.astype(np.float64), time_s, 1)
+    else:
+        b, a = 1.0, float(time_s[0]) - float(frame[0])
+    t = a + b * k
+    t[frame] = time_s
+    inside = (k > frame[0]) & (k < frame[-1])
+    t[inside] = np.interp(k[inside], frame, time_s)
+    return t
+
+
 def export_capture(
     sample: CaptureSample,
     out: str | Path,
@@ -294,7 +318,7 @@ def _write_export(
         )
         target = out / cam.name if fmt == "openpose" else out / f"{cam.name}{dlc_suffix}"
         write_keypoints(kp, target, fmt)
-        t = sample.timestamp_s[idx]
+        t = _every_frame_time(frame, sample.timestamp_s[idx])
         t = t if shared_clock else t - t[0]
         ts_path = out / f"{cam.name}_timestamps.csv"
         _write_text(ts_path, "".join(f"frame,{x:.9f}\n" for x in t))

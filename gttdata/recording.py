@@ -23,8 +23,10 @@ A project file (TOML or YAML) makes a run repeatable::
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import logging
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +37,7 @@ import yaml
 from gttdata.calibration import load_calibration, undistort_points
 from gttdata.cameras import CameraRig
 from gttdata.capture.views import SEQUENCING, Observations
-from gttdata.detectors import Keypoints2D, read_keypoints
+from gttdata.detectors import Keypoints2D, candidate_sets, read_keypoints
 from gttdata.errors import CalibrationError, KeypointFormatError, NoDetectionsError
 from gttdata.skeleton import Skeleton, cmu31
 
@@ -257,6 +259,12 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
         sk = Skeleton.from_dict(wanted, source="project skeleton")
     else:
         name = wanted or kset or ("cmu31" if names == cmu31().joint_names else None)
+        if name is None and len(candidate_sets(len(names))) > 1:
+            both = " and ".join(candidate_sets(len(names)))
+            raise KeypointFormatError(
+                f"keypoints: {len(names)} joints fit {both}, which put different joints at the same "
+                "index; name the skeleton (--skeleton, the project's 'skeleton' or Config.toml's pose_model)"
+            )
         if name is None:
             return Skeleton(
                 name=f"detector{len(names)}", joint_names=names, parents=(-1,) + (0,) * (len(names) - 1)
@@ -264,12 +272,48 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
         try:
             sk = get_skeleton(name)
         except KeyError as exc:
-            raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
+            from gttdata.skeletons_detectors import POSE2SIM_MODELS, pose2sim_model
+
+            if str(name).strip().upper().replace("-", "_") not in POSE2SIM_MODELS:
+                raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
+            sk = get_skeleton(pose2sim_model(name))  # Pose2Sim's model names: COCO, Body_with_feet...
     if sk.n_joints != len(names):
         raise KeypointFormatError(
             f"skeleton {sk.name!r} has {sk.n_joints} joints but the keypoint sources have {len(names)}"
         )
     return sk
+
+
+def _recording_skeleton(names: tuple[str, ...], wanted: str | dict | None, first: Keypoints2D) -> Skeleton:
+    """:func:`_skeleton`, with a DeepLabCut file's limbs read from its project's ``config.yaml`` when found."""
+    sk = _skeleton(names, wanted, first.keypoint_set)
+    if wanted is None and first.fmt == "dlc" and sk.name.startswith("detector"):
+        from gttdata.skeletons_detectors import dlc_project_edges, skeleton_from_edges
+
+        found = dlc_project_edges(first.source)
+        if found is not None:
+            sk = skeleton_from_edges(f"dlc{len(names)}", names, found[1])
+    return sk
+
+
+def _last_number(name: str) -> int | None:
+    m = re.search(r"(\d+)(?!.*\d)", name)
+    return int(m.group(1)) if m else None
+
+
+def _by_number(cam: CameraInput, by_name: dict) -> CameraInput:
+    """``cam`` renamed to the one calibration camera with the same last number (``cam01`` -> ``cam_01``).
+
+    A name the calibration has, or a number no or several calibration cameras share, is kept as it is.
+    """
+    n = _last_number(cam.name)
+    if cam.name in by_name or n is None:
+        return cam
+    same = [k for k in by_name if _last_number(k) == n]
+    if len(same) != 1:
+        return cam
+    log.info("camera %r matched to calibration camera %r by its number", cam.name, same[0])
+    return dataclasses.replace(cam, name=same[0])
 
 
 @dataclass(frozen=True)
@@ -320,7 +364,12 @@ class Recording:
         cams, kps, times, fps = [], [], [], []
         empty: list[str] = []
         joint_names = None
+        used: set[str] = set()
         for c in spec.cameras:
+            c = _by_number(c, by_name)
+            if c.name in used:
+                raise KeypointFormatError(f"{c.keypoints}: a second keypoint source for camera {c.name!r}")
+            used.add(c.name)
             if c.name not in by_name:
                 raise CalibrationError(
                     f"{c.keypoints}: camera {c.name!r} is not in calibration {spec.calibration} "
@@ -363,7 +412,7 @@ class Recording:
                 f"no camera has a detection: {empty[0]}"
                 + (f" (and {len(empty) - 1} more)" if len(empty) > 1 else "")
             )
-        sk = _skeleton(joint_names, spec.skeleton, kps[0].keypoint_set)
+        sk = _recording_skeleton(joint_names, spec.skeleton, kps[0])
         return cls(
             rig=CameraRig(tuple(cams)),
             keypoints=tuple(kps),

@@ -550,3 +550,16 @@ register_skeleton(
 register_skeleton(
     "monkey13", "primate", monkey13, "procedural monkey (gttdata.mocap.procedural.generate_monkey_motion)"
 )
+
+
+def _register_detector_sets() -> None:
+    """Register the keypoint sets read from detector files only (:mod:`gttdata.skeletons_detectors`)."""
+    from gttdata.skeletons_detectors import DETECTOR_SKELETONS
+
+    for name, build in DETECTOR_SKELETONS.items():
+        register_skeleton(
+            name, "human", build, "detector files only (gttdata.skeletons_detectors); not simulated"
+        )
+
+
+_register_detector_sets()

@@ -27,14 +27,19 @@ __all__ = [
     "Keypoints2D",
     "KeypointFormat",
     "detect_format",
+    "candidate_sets",
     "keypoint_set_for",
     "read_keypoints",
     "write_keypoints",
 ]
 
 #: The detector keypoint sets a joint count identifies, as ``gttdata.skeletons`` names (OpenPose and
-#: COCO files carry no joint names): their joint names and order are those skeletons'.
-_DETECTOR_SETS: tuple[str, ...] = ("coco17", "body25", "halpe26")
+#: COCO files carry no joint names): their joint names and order are those skeletons'. BODY_25 and
+#: BODY_25B share a count (25) and are never guessed: see :func:`candidate_sets`.
+_DETECTOR_SETS: tuple[str, ...] = (
+    "coco17", "coco18", "hand21", "body25", "body25b", "halpe26", "blazepose33", "halpe68", "coco133",
+    "body135", "halpe136",
+)  # fmt: skip
 
 
 def _keypoint_sets() -> dict[str, tuple[str, ...]]:
@@ -46,14 +51,21 @@ def _keypoint_sets() -> dict[str, tuple[str, ...]]:
 #: Joint names of each detector keypoint set in the detector's output order (from ``gttdata.skeletons``).
 KEYPOINT_SETS: dict[str, tuple[str, ...]] = _keypoint_sets()
 
-_SET_BY_COUNT = {len(v): k for k, v in KEYPOINT_SETS.items()}
+_COUNTS = [len(v) for v in KEYPOINT_SETS.values()]
+_SET_BY_COUNT = {len(v): k for k, v in KEYPOINT_SETS.items() if _COUNTS.count(len(v)) == 1}
+
+
+def candidate_sets(n_joints: int) -> tuple[str, ...]:
+    """Every detector keypoint set with ``n_joints`` joints (two for 25: ``body25`` and ``body25b``)."""
+    return tuple(k for k, v in KEYPOINT_SETS.items() if len(v) == int(n_joints))
 
 
 def keypoint_set_for(n_joints: int) -> tuple[str, tuple[str, ...]]:
     """Keypoint set recognised from a joint count: ``(set name, joint names)``.
 
-    25 joints are Body-25, 17 are COCO-17, 26 are Halpe-26 (the skeletons of ``gttdata.skeletons``); any
-    other count gives ``("", ("kp0", ...))``.
+    A count that names one set gives it (17 COCO-17, 18 OpenPose COCO, 26 Halpe-26, 33 BlazePose, 133
+    COCO-133...; the skeletons of ``gttdata.skeletons``). A count two sets share (25: BODY_25 and
+    BODY_25B) or no set has gives ``("", ("kp0", ...))``: the skeleton must then be named.
     """
     name = _SET_BY_COUNT.get(int(n_joints), "")
     if name:

@@ -3,7 +3,8 @@
 Each file holds ``{"people": [{"pose_keypoints_2d": [x0, y0, c0, x1, y1, c1, ...]}, ...]}``. A joint
 OpenPose did not find is written as ``0, 0, 0``. The frame number is the last group of digits in the
 file name (``cam1_000000000042_keypoints.json`` is frame 42); files without digits are numbered in
-name order. With several people in a frame the one with the highest summed confidence is kept (one
+name order. A person written as ``{}`` or with an empty list (Pose2Sim's ``pose-associated`` output
+for a frame where the tracked person was not found) is nobody. With several people in a frame the one with the highest summed confidence is kept (one
 subject per capture).
 """
 
@@ -39,6 +40,8 @@ def _person(path: Path, doc: object) -> np.ndarray | None:
     best, best_score = None, -np.inf
     for i, person in enumerate(doc["people"]):
         flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
+        if isinstance(person, dict) and not flat:  # Pose2Sim's pose-associated files: {} for nobody
+            continue
         try:
             arr = np.asarray(flat, dtype=np.float64)
         except (TypeError, ValueError):

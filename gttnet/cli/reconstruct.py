@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -20,7 +19,7 @@ __all__ = ["register", "reconstruct_cmd"]
 log = logging.getLogger(__name__)
 
 
-def _method_fields(rec) -> dict:
+def _method_fields(rec, camera_names=None) -> dict:
     """The method fields of a reconstruction's report.
 
     ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto"),
@@ -37,7 +36,11 @@ def _method_fields(rec) -> dict:
     if "refined" in rec.info:
         out["refined"] = bool(rec.info["refined"])
     if "clock_offsets_s" in rec.info:
-        out["clock_offsets_s"] = {k: round(float(v), 6) for k, v in rec.info["clock_offsets_s"].items()}
+        names = list(camera_names or [])
+        out["clock_offsets_s"] = {
+            (names[int(k)] if str(k).isdigit() and int(k) < len(names) else str(k)): round(float(v), 6)
+            for k, v in rec.info["clock_offsets_s"].items()
+        }
     return out
 
 
@@ -94,9 +97,6 @@ def _report(loaded, rec) -> dict:
     return out
 
 
-_PROJECT_SUFFIXES = (".toml", ".yaml", ".yml")
-
-
 def _window_arg(value: str) -> int | str | None:
     """``--window``: ``"auto"``, None for ``off``, or an image count >= 2."""
     if value in ("auto", "off"):
@@ -123,84 +123,6 @@ class _WarningLines(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         click.echo(f"warning: {record.getMessage()}", err=True)
-
-
-def _load_recording(spec, sequencing, min_confidence, seed, weights=True):
-    """Recording view plus the ground truth an exported project names (scoring only).
-
-    The calibration's unit detection and plausibility warnings, and cameras without a usable detection,
-    become ``warning:`` lines on stderr.
-    """
-    from gttdata.recording import Recording, ground_truth_for
-
-    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttdata.recording")]
-    handler = _WarningLines(logging.WARNING)
-    for lg in loggers:
-        lg.addHandler(handler)
-    try:
-        rec = Recording.load(spec)
-        view = rec.view(
-            sequencing, min_confidence=min_confidence, weights=weights, seed=0 if seed is None else seed
-        )
-    finally:
-        for lg in loggers:
-            lg.removeHandler(handler)
-    gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
-    return rec, view, gt
-
-
-def _write_outputs(rec, view, outs, resample_hz, *, image_index, source, recording_json):
-    import numpy as np
-
-    from gttnet.io.motion_files import MOTION_SUFFIXES, motion_table, resample, write_motion
-    from gttnet.io.output import write_reconstruction
-
-    table = motion_table(rec, view)
-    time_s = np.full(rec.n_images, np.nan)
-    if table.timed:
-        time_s[table.row] = table.time_s
-    order_rows = table.row.copy()
-    if resample_hz is not None:
-        table = resample(table, resample_hz)
-    for out in outs:
-        suffix = Path(out).suffix.lower()
-        if suffix in MOTION_SUFFIXES:
-            write_motion(table, out)
-        else:
-            write_reconstruction(
-                rec,
-                out,
-                image_index=image_index,
-                source=source,
-                extra={
-                    "cam_id": view.observations.cam_id.astype(np.int64),
-                    "frame": np.asarray(view.frame, dtype=np.int64),
-                    "time_s": time_s,
-                    "time_order": order_rows,
-                },
-                extra_attrs={
-                    "camera_names": json.dumps(list(view.camera_names)),
-                    "recording": recording_json,
-                },
-            )
-
-
-def _timing_options(method: str, view) -> dict:
-    """Known per-camera timing for methods that take it (clock recovery: ``frame_times_s``, ``fps``)."""
-    import inspect
-
-    import numpy as np
-
-    from gttnet.methods import method_spec
-
-    params = inspect.signature(method_spec(method).fn).parameters
-    obs, out = view.observations, {}
-    if "frame_times_s" in params and obs.stream_time_s is not None:
-        out["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
-    fps = np.asarray(view.fps, dtype=np.float64)
-    if "fps" in params and fps.size and np.all(np.isfinite(fps)):
-        out["fps"] = fps.tolist()
-    return out
 
 
 class _Held(logging.Handler):
@@ -240,7 +162,7 @@ def _timing_fields(rec, view, *, quiet: bool, held: list[str]) -> dict:
     if not quiet:
         for line in lines:
             click.echo(f"warning: {line}", err=True)
-    out: dict[str, Any] = {}
+    out: dict = {}
     rates = (rec.info.get("frame_rates") or {}).get("cameras")
     if rates:
         out["frame_rates_hz"] = {names.get(int(c), c): round(r["used_hz"], 4) for c, r in rates.items()}
@@ -279,35 +201,37 @@ def _resolve_input(
     units,
     seed,
     split=None,
+    skeleton=None,
 ) -> dict:
-    """The run's input: a recording (calibration + keypoints, or a project file) or one INPUT file."""
-    is_project = (
-        calibration is None
-        and len(input_paths) == 1
-        and Path(input_paths[0]).suffix.lower() in _PROJECT_SUFFIXES
-    )
-    if calibration is not None or is_project or keypoints:
-        from gttdata.recording import load_project
-        from gttnet.io.recording_input import spec_from_options, spec_to_json
+    """The run's input: a recording (calibration + keypoints, project file, Pose2Sim/anipose folder) or a file."""
+    from gttnet.recording import load_view, recording_spec
 
-        if is_project:
-            spec = load_project(input_paths[0])
-            if calibration_units is not None:
-                spec = dataclasses.replace(spec, calibration_units=calibration_units)
-        else:
-            if calibration is None:
-                raise click.UsageError("--keypoints needs --calibration (or give a project file as INPUT)")
-            spec = spec_from_options(
-                calibration,
-                list(keypoints) + list(input_paths),
-                fps=tuple(fps),
-                timestamps=tuple(timestamps),
-                clock=clock,
-                calibration_units=calibration_units,
+    spec = recording_spec(
+        input_paths,
+        calibration=calibration,
+        keypoints=keypoints,
+        fps=fps,
+        timestamps=timestamps,
+        clock=clock,
+        calibration_units=calibration_units,
+        min_confidence=min_confidence,
+        skeleton=skeleton,
+    )
+    if spec is not None:
+        from gttnet.io.recording_input import spec_to_json
+
+        handler = _WarningLines(logging.WARNING)
+        names = ("gttdata.calibration", "gttdata.recording_folders", "gttdata.recording")
+        loggers = [logging.getLogger(n) for n in names]
+        for lg in loggers:
+            lg.addHandler(handler)
+        try:
+            recording, view, gt = load_view(
+                spec, sequencing, min_confidence=min_confidence, weights=weights, seed=seed or 0
             )
-        if min_confidence is not None:
-            spec = dataclasses.replace(spec, min_confidence=min_confidence)
-        _, view, gt = _load_recording(spec, sequencing, min_confidence, seed, weights)
+        finally:
+            for lg in loggers:
+                lg.removeHandler(handler)
         return {
             "loaded": None,
             "view": view,
@@ -315,6 +239,8 @@ def _resolve_input(
             "source": str(spec.calibration),
             "image_index": view.image_index,
             "recording_json": spec_to_json(spec),
+            "skeleton": recording.skeleton,
+            "recording": recording,
         }
     if len(input_paths) != 1:
         raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
@@ -370,10 +296,18 @@ def _resolve_input(
 )
 @click.option(
     "--fps",
-    type=float,
     multiple=True,
-    help="Frame rate, Hz: once for every camera or once per camera, in order. Clock recovery checks it "
-    "against the images [default: timestamps, else estimated from the images with a warning].",
+    metavar="HZ",
+    help="Frame rate, Hz: one for every camera ('30'), one per camera in order ('25,30,60' or the option "
+    "repeated) or by camera ('cam_0=25,cam_2=60'). Clock recovery checks it against the images [default: "
+    "the project's, Config.toml's or the videos', else timestamps, else estimated from the images with a "
+    "warning].",
+)
+@click.option(
+    "--skeleton",
+    default=None,
+    help="Keypoint set of the detections (BODY_25B, BODY_25, HALPE_26, COCO_133, BLAZEPOSE... docs/SKELETONS.md) "
+    "[default: the project's or Config.toml's pose_model, else recognised from the joint count].",
 )
 @click.option(
     "--timestamps",
@@ -444,11 +378,34 @@ def _resolve_input(
 )
 @click.option("--overwrite", is_flag=True, help="Replace existing --out files.")
 @click.option(
+    "--export-keypoints",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Also write each camera's 2-D keypoints re-timed onto the common clock (the .trc's frames) as "
+    "OpenPose JSON folders, for Pose2Sim's or anipose's triangulation (needs times).",
+)
+@click.option(
+    "--up",
+    type=click.Choice(["y", "z"]),
+    default="y",
+    show_default=True,
+    help="Up axis of a .trc (y: OpenSim's and Pose2Sim's, X Y Z = world y z x; z: the world's).",
+)
+@click.option(
+    "--filter",
+    "filter_spec",
+    default=None,
+    metavar="KIND:VALUE",
+    help="Low-pass the uniform .trc/.c3d result: butterworth:HZ (zero-phase, cut-off), gaussian:SIGMA_FRAMES "
+    "or median:WINDOW_FRAMES.",
+)
+@click.option(
     "--resample",
     "resample_hz",
     type=click.FloatRange(min=0.0, min_open=True),
     default=None,
-    help="Interpolate .trc/.c3d/.csv outputs onto this uniform rate, Hz (needs times).",
+    help="Uniform rate of the outputs, Hz (needs times): .trc/.c3d default to the fastest camera's rate, "
+    ".csv to one row per image.",
 )
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object with the run's summary on stdout."
@@ -489,6 +446,7 @@ def reconstruct_cmd(
     calibration,
     keypoints,
     fps,
+    skeleton,
     timestamps,
     clock,
     calibration_units,
@@ -503,6 +461,9 @@ def reconstruct_cmd(
     units,
     out_paths,
     overwrite,
+    export_keypoints,
+    up,
+    filter_spec,
     resample_hz,
     as_json,
     model_path,
@@ -528,6 +489,7 @@ def reconstruct_cmd(
       gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
     from gttnet.methods import check_sequencing, method_spec, reconstruct
+    from gttnet.recording import export_keypoints_on_clock, marker_names, plain, timing_options, write_outputs
 
     method = method or _method_default()
     if subjects > 1 and method == "auto":
@@ -539,6 +501,9 @@ def reconstruct_cmd(
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--method") from exc
     _check_outs(out_paths, overwrite)
+    from gttnet.recording import parse_filter
+
+    trc = {"up": up, "filter": parse_filter(filter_spec), "names": None}
     options = _gttnet_options(method, model_path, refine)
     inp = _resolve_input(
         input_paths,
@@ -557,6 +522,7 @@ def reconstruct_cmd(
         units=units,
         seed=seed,
         split=split,
+        skeleton=skeleton,
     )
     loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
     progress = progress and not quiet
@@ -594,13 +560,13 @@ def reconstruct_cmd(
                     method,
                     window=window_arg,
                     progress=progress,
-                    **_timing_options(method, view),
+                    **timing_options(method, view),
                     **options,
                 )
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
         else:
             with _time_warnings_held() as held:
-                rec = reconstruct(obs, method, **_timing_options(method, view), **options)
+                rec = reconstruct(obs, method, **timing_options(method, view), **options)
             summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
@@ -608,8 +574,10 @@ def reconstruct_cmd(
     if blind:
         summary["images_without_joints"] = blind
     if out_paths:
+        handler = _WarningLines(logging.WARNING)
+        logging.getLogger("gttnet.recording").addHandler(handler)
         try:
-            _write_outputs(
+            write_outputs(
                 rec,
                 view,
                 out_paths,
@@ -617,13 +585,20 @@ def reconstruct_cmd(
                 image_index=inp["image_index"],
                 source=inp["source"],
                 recording_json=inp["recording_json"],
+                trc=trc | {"names": marker_names(inp.get("skeleton"), obs)},
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
+        finally:
+            logging.getLogger("gttnet.recording").removeHandler(handler)
+    if export_keypoints is not None:
+        export_keypoints_on_clock(
+            inp.get("recording"), rec, view, export_keypoints, rate_hz=resample_hz, overwrite=overwrite
+        )
     if as_json:
         click.echo(json.dumps(summary))
         return
-    parts = [f"{k}={v}" for k, v in summary.items()]
+    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
 
 
@@ -656,7 +631,7 @@ def _report_recording(view, rec, gt_points) -> dict:
     }
     if "windows" in rec.info:
         out["windows"] = rec.info["windows"]
-    out.update(_method_fields(rec))
+    out.update(_method_fields(rec, view.camera_names))
     if gt_points is not None:
         out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt_points), 4)
     return out

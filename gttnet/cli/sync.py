@@ -89,7 +89,29 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 
 
 @click.command("sync")
-@click.argument("input_path", metavar="INPUT", type=click.Path())
+@click.argument("input_paths", metavar="[INPUT]", nargs=-1, type=click.Path())
+@click.option(
+    "--calibration",
+    type=click.Path(),
+    default=None,
+    help="Calibration of a recording (as gttnet reconstruct takes it).",
+)
+@click.option(
+    "--keypoints",
+    multiple=True,
+    help="Keypoint source per camera, PATH or NAME=PATH (as gttnet reconstruct takes them).",
+)
+@click.option(
+    "--timestamps",
+    type=click.Path(),
+    multiple=True,
+    help="Per-frame timestamp CSV (ffprobe output) per camera, in the order of --keypoints.",
+)
+@click.option(
+    "--skeleton",
+    default=None,
+    help="Keypoint set of a recording's detections (BODY_25B, BODY_25, HALPE_26..., docs/SKELETONS.md).",
+)
 @click.option(
     "--format",
     "fmt",
@@ -108,11 +130,12 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 )
 @click.option(
     "--fps",
-    default=None,
+    multiple=True,
     metavar="HZ",
-    help="Nominal frame rate: one for all cameras ('30'), one per camera id ('25,30,60') or pairs "
-    "('0=25,2=60'), checked against the images (a rate they contradict is replaced, with a warning) "
-    "[default: estimated from the images, relative to one camera, with a warning].",
+    help="Nominal frame rate: one for all cameras ('30'), one per camera in order ('25,30,60' or the option "
+    "repeated) or by camera ('0=25,2=60', or 'cam_0=25' for a recording), checked against the images (a rate "
+    "they contradict is replaced, with a warning) [default: a recording's rates, else estimated from the "
+    "images, relative to one camera, with a warning].",
 )
 @click.option(
     "--frame-times",
@@ -141,7 +164,11 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
 @friendly_errors
 def sync_cmd(
-    input_path,
+    input_paths,
+    calibration,
+    keypoints,
+    timestamps,
+    skeleton,
     fmt,
     sample,
     split,
@@ -157,8 +184,9 @@ def sync_cmd(
 ):
     """Recover each camera's clock (offset, rate, drift, uncertainty) of INPUT from its 2-D skeletons.
 
-    INPUT needs each camera's frames in order: a shard, a .mat/.json with stream order, or a recording's
-    project file (.toml/.yaml, whose per-camera timestamp files or rates give each camera's own clock).
+    INPUT needs each camera's frames in order: a shard, a .mat/.json with stream order, or a recording (a
+    project file, a Pose2Sim/anipose folder, or --calibration with --keypoints, as gttnet reconstruct takes
+    them; its per-camera timestamp files or rates give each camera's own clock).
     Timestamps on a shared clock are never read. The clocks are written to --out and printed: frame k of camera c was taken at
     offset_s + (1 + drift_ppm 1e-6) k / rate_hz (or its --frame-times time instead of k / rate_hz).
 
@@ -172,28 +200,43 @@ def sync_cmd(
     import numpy as np
 
     from gttnet.io import load_input
+    from gttnet.recording import load_view, recording_spec
     from gttnet.sync import clock_times, recover_clocks
     from gttnet.sync.rates import time_warnings
 
-    rates = parse_fps(fps)
     out = Path(out_path)
     if out.exists() and not overwrite:
         raise click.ClickException(f"{out}: exists; pass --overwrite to replace it")
     names = None
     gt = None
-    if Path(input_path).suffix.lower() in (".toml", ".yaml", ".yml"):  # a recording's project file
-        from gttdata.recording import Recording, load_project
+    spec = recording_spec(
+        input_paths,
+        calibration=calibration,
+        keypoints=keypoints,
+        fps=fps,
+        timestamps=timestamps,
+        skeleton=skeleton,
+    )
+    input_path = input_paths[0] if len(input_paths) == 1 else ", ".join(input_paths)
+    if spec is not None:  # a recording: its rates (the project's, Config.toml's or --fps) by camera
         from gttnet.cli.reconstruct import _WarningLines
 
         rec_log = logging.getLogger("gttdata.recording")  # a camera without usable detections: why
         lines = _WarningLines(logging.WARNING)
         rec_log.addHandler(lines)
         try:
-            view = Recording.load(load_project(input_path)).view("partial", weights=False)
+            _, view, _ = load_view(spec, "partial", weights=False)
         finally:
             rec_log.removeHandler(lines)
         obs, names = view.observations, list(view.camera_names)
+        known = np.asarray(view.fps, dtype=np.float64)
+        rates = known.tolist() if known.size and np.all(np.isfinite(known)) else None
     else:
+        if len(input_paths) != 1:
+            raise click.UsageError(
+                "give one INPUT file, a project file, a folder, or --calibration with --keypoints"
+            )
+        rates = parse_fps(",".join(fps) if fps else None)
         check_shard_split(input_path, split)
         try:
             with warnings.catch_warnings(record=True) as caught:
@@ -256,7 +299,8 @@ def sync_cmd(
     for c, o, r, d, s in zip(
         clocks.cameras, clocks.offset_s, clocks.rate_hz, clocks.drift_ppm, clocks.offset_std_s, strict=True
     ):
-        click.echo(f"{c:>6d} {o:>12.6f} {r:>9.3f} {d:>10.1f} {1e3 * s:>14.3f}")
+        label = names[int(c)] if names is not None else str(int(c))
+        click.echo(f"{label:>6} {o:>12.6f} {r:>9.3f} {d:>10.1f} {1e3 * s:>14.3f}")
     if "offset_error_frames" in report:
         click.echo(
             "offset error vs the file's true times, frames: "

@@ -134,7 +134,11 @@ def test_mmpose_predictions(tmp_path):
     assert np.isnan(kp.xy[0, 1]).all() and kp.xy[1, 0].tolist() == [9, 9]  # best-scoring instance
 
 
-@pytest.mark.parametrize("n, name", [(25, "body25"), (17, "coco17"), (26, "halpe26")])
+@pytest.mark.parametrize(
+    "n, name",
+    [(17, "coco17"), (18, "coco18"), (26, "halpe26"), (33, "blazepose33"), (68, "halpe68"), (133, "coco133"),
+     (135, "body135"), (136, "halpe136")],
+)  # fmt: skip
 def test_openpose_keypoint_sets(tmp_path, n, name):
     doc = {"people": [{"pose_keypoints_2d": [10.0, 20.0, 0.5] * n}]}
     (tmp_path / "cam_000000000007_keypoints.json").write_text(json.dumps(doc))
@@ -220,3 +224,30 @@ def test_sleap_reader(tmp_path):
     assert kp.joint_names == ("head", "tail") and kp.frame.tolist() == [0, 2, 3]
     np.testing.assert_allclose(kp.xy[:, 0], [[0, 0], [2, 4], [3, 6]])
     np.testing.assert_allclose(kp.score[:, 1], 0.4)
+
+
+def test_openpose_25_joints_are_never_guessed(tmp_path):
+    """BODY_25 and BODY_25B share 25 points: without a named skeleton the recording names both."""
+    from gttdata.recording import _skeleton
+
+    doc = {"people": [{"pose_keypoints_2d": [10.0, 20.0, 0.5] * 25}]}
+    (tmp_path / "cam_000000000007_keypoints.json").write_text(json.dumps(doc))
+    kp = read_keypoints(tmp_path)
+    assert kp.keypoint_set == "" and kp.n_joints == 25
+    with pytest.raises(KeypointFormatError, match="body25 and body25b"):
+        _skeleton(kp.joint_names, None, kp.keypoint_set)
+    assert _skeleton(kp.joint_names, "BODY_25B", "").joint_names[17:19] == ("Neck", "Head")
+    assert _skeleton(kp.joint_names, "body25", "").joint_names[8] == "MidHip"
+    assert _skeleton(kp.joint_names[:18], "COCO", "").name == "coco18"  # Pose2Sim's model names too
+    with pytest.raises(KeypointFormatError, match="unknown skeleton 'BODY_99'"):
+        _skeleton(kp.joint_names, "BODY_99", "")
+
+
+def test_openpose_empty_person_is_nobody(tmp_path):
+    """Pose2Sim's pose-associated output writes ``"people": [{}]`` where the person was not found."""
+    (tmp_path / "c_000000000000_keypoints.json").write_text(json.dumps({"people": [{}]}))
+    (tmp_path / "c_000000000001_keypoints.json").write_text(
+        json.dumps({"people": [{"pose_keypoints_2d": [1.0, 2.0, 0.9] * 17}]})
+    )
+    kp = read_keypoints(tmp_path)
+    assert kp.frame.tolist() == [0, 1] and np.isnan(kp.xy[0]).all() and kp.xy[1, 0].tolist() == [1, 2]

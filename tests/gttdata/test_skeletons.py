@@ -81,7 +81,7 @@ def test_lookup_ignores_case_and_separators_and_names_unknown():
     assert get_skeleton("COCO-17") == get_skeleton("coco17")
     assert skeleton_family("not-a-skeleton") is None
     with pytest.raises(KeyError, match="coco17"):
-        get_skeleton("coco18")
+        get_skeleton("coco19")
 
 
 @pytest.mark.parametrize("target", derivable_from_cmu31())

@@ -115,9 +115,9 @@ def test_recipe_skeleton_key_validated_and_old_hash_kept():
     assert "skeleton" not in json.dumps(recipe_to_dict(tiny))  # defaults leave the canonical form alone
     data = recipe_to_dict(tiny)
     assert recipe_hash(parse_recipe(data)) == recipe_hash(tiny)
-    data["splits"][0]["sources"][0]["skeleton"] = "coco18"
+    data["splits"][0]["sources"][0]["skeleton"] = "coco19"
     with pytest.raises(
-        RecipeError, match=r"sources\[0\]\.skeleton: expected one of .*coco17.*found 'coco18'"
+        RecipeError, match=r"sources\[0\]\.skeleton: expected one of .*coco17.*found 'coco19'"
     ):
         parse_recipe(data, source="r.yaml")
     data["splits"][0]["sources"][0]["skeleton"] = "hand21"

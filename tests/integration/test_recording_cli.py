@@ -55,7 +55,8 @@ def test_round_trip_trc_c3d_csv_equal_h5_and_shard_mpjpe(shard, tmp_path):
     X = arrays["points3d"][arrays["time_order"]]
     names, t, P, units = read_trc(outs[1])
     assert units == "m" and len(names) == 6 and P.shape == X.shape
-    assert np.nanmax(np.abs(P - X)) < 1e-6 and np.array_equal(np.isnan(P), np.isnan(X))
+    Y = X[..., [1, 2, 0]]  # TRC is Y up: X, Y, Z = world y, z, x
+    assert np.nanmax(np.abs(P - Y)) < 1e-6 and np.array_equal(np.isnan(P), np.isnan(X))
     labels, _, C, c3d_units = read_c3d_points(outs[2])
     assert c3d_units == "m" and np.nanmax(np.abs(C - X)) < 1e-6
     _, t_csv, cams, frames, Q = read_motion_csv(outs[3])
@@ -73,8 +74,8 @@ def test_shared_clock_full_sequencing_times_and_resample(shard, tmp_path):
     from gttdata.shards.reader import ShardReader
 
     project = _export(shard, tmp_path / "rec", "--shared-clock", "--format", "dlc")
-    trc, res_trc = tmp_path / "r.trc", tmp_path / "u.trc"
-    got = _json(_reconstruct(project, "--method", "hpf", "--out", trc, "--json"))
+    trc, res_trc, csv = tmp_path / "r.trc", tmp_path / "u.trc", tmp_path / "r.csv"
+    got = _json(_reconstruct(project, "--method", "hpf", "--out", trc, "--out", csv, "--json"))
     assert got["sequencing"] == "full"
     # Without confidence weights the export is the shard's capture exactly.
     unweighted = _json(_reconstruct(project, "--method", "hpf", "--no-weights", "--json"))
@@ -82,8 +83,14 @@ def test_shared_clock_full_sequencing_times_and_resample(shard, tmp_path):
     assert unweighted["mpjpe_mm"] == pytest.approx(ref["mpjpe_mm"], rel=1e-6)
     with ShardReader(shard) as r:
         truth = r.read_sample(0)
-    _, t, _, _ = read_trc(trc)
+    t = read_motion_csv(csv)[1]  # the .csv keeps one row per image, at its time
     np.testing.assert_allclose(t, np.sort(truth.timestamp_s), atol=1e-8)
+    # The .trc has one row per frame at the fastest camera's rate, as OpenSim expects.
+    rate = max(truth.meta["capture"]["fps_hz"]) if "capture" in truth.meta else 30.0
+    _, tt, _, _ = read_trc(trc)
+    np.testing.assert_allclose(np.diff(tt), 1.0 / rate, atol=1e-8)
+    header = dict(zip(*[ln.split("\t") for ln in trc.read_text().splitlines()[1:3]], strict=False))
+    assert float(header["DataRate"]) == pytest.approx(rate) and int(header["NumFrames"]) == tt.shape[0]
     _json(_reconstruct(project, "--method", "hpf", "--out", res_trc, "--resample", "50", "--json"))
     _, tu, Pu, _ = read_trc(res_trc)
     np.testing.assert_allclose(np.diff(tu), 0.02, atol=1e-8)
