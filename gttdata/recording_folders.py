@@ -37,7 +37,7 @@ from gttdata.calibration import load_calibration
 from gttdata.errors import CalibrationError, KeypointFormatError
 from gttdata.recording import CameraInput, RecordingSpec
 
-__all__ = ["POSE_FOLDERS", "is_recording_folder", "spec_from_folder"]
+__all__ = ["POSE_FOLDERS", "is_recording_folder", "spec_from_folder", "trial_folders"]
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +86,15 @@ def _trials(path: Path, depth: int = 2) -> list[Path]:
         if "calib" not in sub.name.lower():
             out += _trials(sub, depth - 1)
     return out
+
+
+def trial_folders(path: str | Path) -> list[Path]:
+    """Pose2Sim trial folders at or below ``path`` (two levels at most: session, participant), in natural order.
+
+    A folder whose name holds ``calib`` is never searched (it is the calibration's).
+    """
+    path = Path(path)
+    return _trials(path) if path.is_dir() else []
 
 
 def _read_toml(path: Path) -> dict:

@@ -31,7 +31,7 @@ def main() -> None:
 
 
 # Each subcommand module adds itself to ``main`` (imported after ``main`` exists; a missing one fails loudly).
-from gttnet.cli import evaluate, export_json, reconstruct, render, segment, sync, train  # noqa: E402
+from gttnet.cli import batch, evaluate, export_json, reconstruct, render, segment, sync, train  # noqa: E402
 
-for _module in (reconstruct, sync, train, evaluate, segment, render, export_json):
+for _module in (reconstruct, sync, batch, train, evaluate, segment, render, export_json):
     _module.register(main)
