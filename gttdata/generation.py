@@ -215,7 +215,10 @@ _PROGRESS = None  # in a worker: the queue its progress goes to (set by _worker_
 def _worker_init(q, parent: int) -> None:
     """Pool initializer: exit with the parent ``parent`` (even after ``kill -9``), report progress to ``q``."""
     global _PROGRESS
+    from gttdata.threads import limit_worker_threads
+
     die_with_parent(parent)
+    limit_worker_threads()  # one BLAS thread per worker unless --threads / GTT_THREADS says otherwise
     _PROGRESS = q
 
 

@@ -8,6 +8,7 @@ import click
 
 from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 __all__ = ["export_cmd", "register"]
 
@@ -59,6 +60,7 @@ def _read_sample(source: Path, split: str, sample: int, variant: str):
     is_flag=True,
     help="Replace an earlier export in --out (only the files it wrote; never other data).",
 )
+@threads_option
 @friendly_errors
 def export_cmd(source, split, sample, variant, fmt, units, shared_clock, seed, out, overwrite):
     """Write one simulated capture as a real recording would look.

@@ -17,6 +17,7 @@ from gttdata.cli.inspect import (  # light: both import only click at module lev
 )
 from gttdata.cli.verify import repo_manifests_dir
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 if TYPE_CHECKING:
     from gttdata.manifest import Manifest
@@ -83,6 +84,7 @@ def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> 
     is_flag=True,
     help="Print one JSON object (dataset summary, timing) and nothing else.",
 )
+@threads_option
 @friendly_errors
 def generate_cmd(
     recipe_path: Path,

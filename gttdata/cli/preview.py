@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 __all__ = ["preview_cmd", "register"]
 
@@ -64,6 +65,7 @@ def _check_3d() -> bool:
 )
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors (implies --no-progress).")
+@threads_option
 @friendly_errors
 def preview_cmd(
     source: Path,

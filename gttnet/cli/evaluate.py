@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 __all__ = ["register", "evaluate_cmd"]
 
@@ -74,6 +75,7 @@ def _prepare_run_dir(output_dir: str, resume: bool, overwrite: bool) -> None:
     is_flag=True,
     help="Print one JSON object (run folder and, per cell, MPJPE mean/median and Kendall tau) instead of the summary.",
 )
+@threads_option
 @friendly_errors
 def evaluate_cmd(
     recipe_path,

@@ -12,6 +12,7 @@ import click
 
 from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import RigError, friendly_errors
+from gttdata.threads import threads_option
 from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 
 __all__ = ["register", "reconstruct_cmd"]
@@ -440,6 +441,7 @@ def _resolve_input(
     "--progress/--no-progress", default=True, show_default=True, help="Window progress bar on stderr."
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only the result (implies --no-progress).")
+@threads_option
 @friendly_errors
 def reconstruct_cmd(
     input_paths,

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 __all__ = ["register", "render_cmd"]
 
@@ -77,6 +78,7 @@ __all__ = ["register", "render_cmd"]
     "--json", "as_json", is_flag=True, help="Print one JSON object: files written and reprojection error."
 )
 @click.argument("extra_keypoints", nargs=-1, type=click.Path())
+@threads_option
 @friendly_errors
 def render_cmd(
     result,

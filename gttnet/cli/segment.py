@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 from gttnet.cli._options import AFFINITY_METHODS, SPLIT_DEFAULT
 
 __all__ = ["register", "segment_cmd", "load_capture"]
@@ -92,6 +93,7 @@ def load_capture(path: str, *, sample: int, split: str, variant: str = "orig"):
 @click.option(
     "--json", "as_json", is_flag=True, help="Print the report (segmentation.json) as one JSON line."
 )
+@threads_option
 @friendly_errors
 def segment_cmd(
     input_path, method, sample, split, sequencing, n_events, model_path, out_dir, overwrite, as_json

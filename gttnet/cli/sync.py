@@ -13,6 +13,7 @@ import click
 
 from gttdata._cli_common import check_shard_split, sample_options
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
 from gttnet.errors import GttNetError
 
@@ -162,6 +163,7 @@ def read_frame_times(path: str | Path, cam_id: np.ndarray, stream_index: np.ndar
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing clocks file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
+@threads_option
 @friendly_errors
 def sync_cmd(
     input_paths,

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from gttdata.errors import friendly_errors
+from gttdata.threads import threads_option
 
 __all__ = ["register", "train_command"]
 
@@ -41,6 +42,7 @@ __all__ = ["register", "train_command"]
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object (run folder, status, validation) instead."
 )
+@threads_option
 @friendly_errors
 def train_command(
     recipe, overrides, resume, out, device, max_steps, progress, quiet, overwrite, as_json

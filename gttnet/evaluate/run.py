@@ -18,12 +18,10 @@ log = logging.getLogger(__name__)
 
 
 def _worker_init() -> None:
-    try:
-        import torch
+    """One thread (torch and BLAS) per worker process unless ``--threads``/``GTT_THREADS`` says otherwise."""
+    from gttdata.threads import limit_worker_threads
 
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover - torch is a dependency
-        pass
+    limit_worker_threads()
 
 
 def _run_jobs(

@@ -21,6 +21,7 @@ import yaml
 from tqdm import tqdm
 
 from gttdata.fileio import OutputLock
+from gttdata.threads import requested_threads
 from gttnet.data import EpochStream, SequenceDataset, TrainItem, collate_items, open_source
 from gttnet.model.inference import load_model, save_model
 from gttnet.model.inputs import random_rotation
@@ -100,8 +101,9 @@ def _prepare(
     device_name = device or recipe.train.device
     rank, world, local = distributed.setup(device_name)
     dev = distributed.select_device(device_name, local_rank=local)
-    if dev.type == "cpu":
-        limit_cpu_threads(recipe.train.threads)
+    if dev.type == "cpu":  # the command line's --threads / GTT_THREADS win over the recipe's train.threads
+        threads = requested_threads()
+        limit_cpu_threads(threads if threads is not None else recipe.train.threads)
     dtype = torch.float64 if recipe.train.dtype == "float64" else torch.float32
     run_dir = distributed.agree_on_path(out, world)
     if rank == 0:
