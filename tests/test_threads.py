@@ -91,13 +91,14 @@ def test_threads_one_is_honoured(shard, command, how, tmp_path):
 
 
 def test_option_wins_over_environment(shard, tmp_path):
+    _set_everything(3)
     res = CliRunner().invoke(
         gttnet_main,
         [*_sync(shard, tmp_path), "--threads", "2"],
         env={"GTT_THREADS": "1", "OMP_NUM_THREADS": "7"},
     )
     assert res.exit_code == 0, res.output
-    assert gtt_threads.requested_threads() == 2 and os.environ["OMP_NUM_THREADS"] == "2"
+    assert gtt_threads.requested_threads() == 2 and _pool_sizes() == {2}
 
 
 def test_default_is_capped_and_keeps_the_users_settings(shard, monkeypatch, tmp_path):
@@ -105,6 +106,7 @@ def test_default_is_capped_and_keeps_the_users_settings(shard, monkeypatch, tmp_
     for var in gtt_threads.THREAD_ENV_VARS:
         monkeypatch.delenv(var, raising=False)
     monkeypatch.setattr(gtt_threads, "usable_cores", lambda: 64)
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.2, 0.2, 0.2))
     _set_everything(5)
     res = CliRunner().invoke(gttnet_main, _sync(shard, tmp_path))
     assert res.exit_code == 0, res.output
@@ -146,6 +148,16 @@ def test_bad_value_is_one_line(shard, main, command, value):
         assert res.output.startswith(
             f"Error: {source}: expected a whole number of threads >= 1, got '{value}'"
         )
+
+
+@pytest.mark.parametrize(
+    ("cores", "load", "expected"),
+    [(2, 0.1, 2), (2, 0.7, 1), (2, 13.0, 1), (16, 0.0, 4), (16, 13.4, 3), (1, 0, 1)],
+)
+def test_default_leaves_busy_cores_alone(monkeypatch, cores, load, expected):
+    monkeypatch.setattr(gtt_threads, "usable_cores", lambda: cores)
+    monkeypatch.setattr(os, "getloadavg", lambda: (load, load, load))
+    assert gtt_threads.default_threads() == expected
 
 
 def test_worker_threads(monkeypatch):
