@@ -57,10 +57,14 @@ def _pins() -> dict[str, str]:
 
 
 def test_outside_a_virtualenv_make_creates_and_uses_dot_venv(tmp_path):
-    lines = _dry_run("test", _base_env(_system_python(tmp_path)))
-    assert lines[0] == "bash scripts/make_venv.sh python3 .venv"
-    assert all(ln.startswith(".venv/bin/python") for ln in lines if "python" in ln.split()[0]), lines
-    assert any(re.match(r"\.venv/bin/python -m pip install -q -c constraints\.txt -e ", ln) for ln in lines)
+    venv = tmp_path / "venv"  # VENV (default .venv) not made yet, whether or not this checkout has a .venv
+    lines = _dry_run("test", _base_env(_system_python(tmp_path)), f"VENV={venv}")
+    assert lines[0] == f"bash scripts/make_venv.sh python3 {venv}"
+    assert all(ln.startswith(f"{venv}/bin/python") for ln in lines if "python" in ln.split()[0]), lines
+    assert (
+        f'{venv}/bin/python -m pip install -q -c constraints.txt -e ".[train,preview,dev,formats]"' in lines
+    )
+    assert "/.venv/" in (ROOT / ".gitignore").read_text().split()
 
 
 def test_inside_a_virtualenv_make_uses_it(tmp_path):
