@@ -33,7 +33,19 @@ def _dry_run(target: str, env: dict[str, str], *args: str) -> list[str]:
 
 def _base_env(python_dir: str) -> dict[str, str]:
     """An environment whose ``python3`` is the one in ``python_dir`` and where no virtualenv is active."""
-    env = {k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"}
+    # Under `make test` the environment carries make's own variables (MAKEFLAGS holds PYTHON=... from .ci/run's
+    # command line): a nested make would inherit them.
+    drop = (
+        "VIRTUAL_ENV",
+        "MAKEFLAGS",
+        "MFLAGS",
+        "MAKELEVEL",
+        "MAKEOVERRIDES",
+        "PYTHON",
+        "VENV",
+        "BASE_PYTHON",
+    )
+    env = {k: v for k, v in os.environ.items() if k not in drop}
     env["PATH"] = os.pathsep.join([python_dir, "/usr/bin", "/bin"])
     return env
 
