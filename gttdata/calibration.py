@@ -24,14 +24,16 @@ import logging
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
-from typing import overload
+from typing import TYPE_CHECKING, overload
 
-import cv2
 import numpy as np
 
 from gttdata.calibration_formats import is_freemocap
 from gttdata.cameras import Camera, CameraRig
 from gttdata.errors import CalibrationError, RigError
+
+if TYPE_CHECKING:  # OpenCV is imported where it is used: 0.05-0.1 s of start-up that most runs never need
+    import cv2
 
 __all__ = [
     "CALIBRATION_UNITS",
@@ -213,6 +215,8 @@ def read_easymocap(
     for p in (intri, extri):
         if not p.is_file():
             raise CalibrationError(f"{p}: calibration file not found")
+    import cv2
+
     fi = cv2.FileStorage(str(intri), cv2.FILE_STORAGE_READ)
     fe = cv2.FileStorage(str(extri), cv2.FILE_STORAGE_READ)
     if not fi.isOpened() or not fe.isOpened():
@@ -345,6 +349,8 @@ def undistort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     """
 
     def undistort(xy: np.ndarray) -> np.ndarray:
+        import cv2
+
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
         dist = np.asarray(camera.dist, dtype=np.float64)
         und = cv2.undistortPoints(xy.reshape(-1, 1, 2), camera.K, dist, None, None, camera.K, crit)
@@ -391,6 +397,8 @@ def distort_points(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     """
 
     def distort(xy: np.ndarray) -> np.ndarray:
+        import cv2
+
         xn = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1) @ np.linalg.inv(camera.K).T
         xn /= xn[:, 2:3]
         proj, _ = cv2.projectPoints(

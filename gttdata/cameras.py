@@ -16,13 +16,38 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 import tomli_w
 
 from gttdata.errors import RigError
 
-__all__ = ["Camera", "CameraRig", "look_at", "ring_rig"]
+__all__ = ["Camera", "CameraRig", "look_at", "ring_rig", "rotation_from_vector"]
+
+
+def rotation_from_vector(rvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix of an axis-angle vector (Rodrigues' formula, as OpenCV's ``Rodrigues``), shape ``(3, 3)``.
+
+    Args:
+        rvec: Rotation axis times angle, radians, shape ``(3,)``; must be finite.
+
+    Raises:
+        ValueError: If ``rvec`` is not 3 finite numbers.
+
+    Example:
+        >>> rotation_from_vector(np.array([0.0, 0.0, np.pi / 2])).round(6).tolist()
+        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    r = np.asarray(rvec, dtype=np.float64).reshape(3)
+    if not np.isfinite(r).all():
+        raise ValueError(f"rotation vector must be finite, got {r.tolist()}")
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-300:
+        return np.eye(3)
+    k = r / theta
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    c, s = np.cos(theta), np.sin(theta)
+    out: np.ndarray = c * np.eye(3) + (1.0 - c) * np.outer(k, k) + s * kx
+    return out
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
@@ -200,6 +225,8 @@ class CameraRig:
         """Rig in the aniposelib / Pose2Sim calibration layout (one table per camera)."""
         out = {}
         for i, c in enumerate(self.cameras):
+            import cv2  # imported on use: 0.05-0.1 s of start-up
+
             rvec, _ = cv2.Rodrigues(c.R)
             out[f"cam_{i}"] = {
                 "name": c.name,
@@ -226,14 +253,14 @@ class CameraRig:
                 if f not in tab:
                     raise RigError(f"{source}: [{key}] field {f!r} is missing")
             try:
-                R, _ = cv2.Rodrigues(np.asarray(tab["rotation"], dtype=np.float64).reshape(3, 1))
+                R = rotation_from_vector(np.asarray(tab["rotation"], dtype=np.float64).reshape(3))
                 T = np.eye(4)
                 T[:3, :3] = R
                 T[:3, 3] = np.asarray(tab["translation"], dtype=np.float64).reshape(3)
                 dist = tuple(float(v) for v in np.asarray(tab.get("distortions", [0.0] * 5)).ravel())
                 size = tuple(int(round(float(v))) for v in tab["size"])
                 K = np.asarray(tab["matrix"], dtype=np.float64)
-            except (ValueError, TypeError, cv2.error) as exc:
+            except (ValueError, TypeError) as exc:
                 raise RigError(f"{source}: [{key}] has a malformed field: {exc}") from exc
             if len(size) != 2:
                 raise RigError(f"{source}: [{key}] field 'size' must be [width, height], found {tab['size']}")

@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from gttdata.calibration import load_calibration, undistort_points
 from gttdata.cameras import CameraRig
@@ -169,6 +168,8 @@ def load_project(path: str | Path) -> RecordingSpec:
     Raises:
         KeypointFormatError: Unparseable file or a missing/invalid field (named).
     """
+    import yaml  # imported on use: a TOML project never needs it
+
     path = Path(path)
     try:
         text = path.read_text()

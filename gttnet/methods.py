@@ -16,12 +16,14 @@ Adding a method takes one decorator and one line:
 
    Keyword arguments become the method's options (``reconstruct(obs, "mymethod", iters=5)``; recipes'
    ``options:``); an unknown option is a ValueError naming the valid ones.
-2. add its module to :func:`_load_builtin_methods` as a plain ``import`` statement (the registry loads
-   the built-ins on first lookup; a missing module is an ImportError, never a silent skip).
+2. add its name and module to :data:`BUILTIN_METHODS` (a lookup imports only the module of the method it
+   names, so a classical method never loads torch; :func:`available_methods` imports them all, and a
+   missing module is an ImportError, never a silent skip).
 """
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import logging
 import time
@@ -32,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from gttdata.capture.views import SEQUENCING, Observations
+from gttnet._builtin_methods import BUILTIN_METHODS
 from gttnet.errors import GttNetError, SequencingError
-from gttnet.geometry.ordering import spectral_order
 
 __all__ = [
     "Reconstruction",
@@ -41,6 +43,8 @@ __all__ = [
     "register_method",
     "reconstruct",
     "available_methods",
+    "BUILTIN_METHODS",
+    "method_names",
     "method_spec",
     "check_sequencing",
     "blank_unobserved",
@@ -171,14 +175,14 @@ def _load_builtin_methods() -> None:
     global _LOADED
     if _LOADED:
         return
-    import gttnet.baselines.dloe  # noqa: F401  ("dloe")
-    import gttnet.baselines.highpass  # noqa: F401  ("hpf")
-    import gttnet.baselines.pseudo  # noqa: F401  ("pseudo")
-    import gttnet.baselines.trajectory_basis  # noqa: F401  ("dct")
-    import gttnet.model.inference  # noqa: F401  ("gttnet")
-    import gttnet.sync.method  # noqa: F401  ("sync", "auto")
-
+    for module in sorted(set(BUILTIN_METHODS.values())):
+        importlib.import_module(module)
     _LOADED = True
+
+
+def method_names() -> tuple[str, ...]:
+    """Names of the built-in and registered methods, sorted, without importing any method's module."""
+    return tuple(sorted(set(BUILTIN_METHODS) | set(_REGISTRY)))
 
 
 def available_methods() -> dict[str, str]:
@@ -193,7 +197,10 @@ def method_spec(name: str) -> MethodSpec:
     Raises:
         ValueError: For an unknown name.
     """
-    _load_builtin_methods()
+    if name not in _REGISTRY and name in BUILTIN_METHODS:
+        importlib.import_module(BUILTIN_METHODS[name])  # this method's module only (see BUILTIN_METHODS)
+    if name not in _REGISTRY:
+        _load_builtin_methods()
     if name in _REGISTRY:
         return _REGISTRY[name]
     raise ValueError(f"unknown method {name!r}; expected one of {', '.join(sorted(_REGISTRY))}")
@@ -256,6 +263,8 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
     rec = spec.fn(obs, **options)
     order = rec.order
     if order is None and rec.affinity is not None:
+        from gttnet.geometry.ordering import spectral_order
+
         order = spectral_order(rec.affinity)
     seconds = time.perf_counter() - t0
     if rec.points3d.shape != (obs.n_images, obs.n_joints, 3):

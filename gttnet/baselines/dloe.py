@@ -6,7 +6,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from gttdata.capture.views import Observations
 from gttnet.baselines._simplex import solve_simplex_qp
@@ -183,6 +182,37 @@ def d_step(Xi: np.ndarray, W: np.ndarray, conv: np.ndarray, params: DLOEParams) 
     return np.clip((0.5 * (lo + hi) - f) / (2.0 * H), 0.0, n)
 
 
+def _xstep(
+    A: np.ndarray,
+    centers: np.ndarray,
+    rays: np.ndarray,
+    vis: np.ndarray,
+    params: DLOEParams,
+    method: str,
+    x_init: np.ndarray,
+) -> np.ndarray:
+    """The X-step with ``A``, shape ``(N, J, 3)``: numpy and SuperLU, or torch's batched dense solve for ``"dense"``.
+
+    ``"auto"`` and ``"sparse"`` run :func:`gttnet.solvers.numpy_xstep.solve_structure_np`, which never imports
+    torch (a second of start-up); ``"dense"`` keeps the torch Cholesky path of
+    :func:`gttnet.solvers.xstep.solve_structure`. Both solve the same float64 systems (equal to rounding).
+    X_init enters as a vanishing ridge: it keeps the solve unique where a joint is unseen in a linked component.
+    """
+    lam1, lam2 = params.lambda1, params.lambda2
+    if method != "dense":
+        from gttnet.solvers.numpy_xstep import solve_structure_np
+
+        return solve_structure_np(A, centers, rays, vis, lambda1=lam1, lambda2=lam2, x_prior=x_init)
+    import torch
+
+    from gttnet.solvers.xstep import solve_structure
+
+    X_t = solve_structure(torch.from_numpy(A), centers, rays, vis, lambda1=lam1, lambda2=lam2, method="dense",
+                          x_prior=x_init)  # fmt: skip
+    X: np.ndarray = X_t.numpy()
+    return X
+
+
 def _scatter(cand: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
     W = np.zeros((n, n))
     rows, cols = np.nonzero(cand >= 0)
@@ -211,7 +241,8 @@ def reconstruct_dloe(
 
     Args:
         obs: Observations (any sequencing).
-        xstep_method: Solver of the X-step (passed to ``solve_structure``).
+        xstep_method: Solver of the X-step: ``"auto"`` and ``"sparse"`` the numpy/SuperLU solve (no torch),
+            ``"dense"`` torch's batched Cholesky (see :func:`_xstep`).
         candidates: Pseudo-triangulation under ``none`` sequencing: ``"dense"`` (all pairs, the reference's
             search and the default), ``"kdtree"`` (:mod:`gttnet.geometry.candidates`: X_init, W-step
             candidates and convergences from the candidate pairs only) or ``"auto"`` (k-d tree above
@@ -225,8 +256,8 @@ def reconstruct_dloe(
     Returns:
         Reconstruction with the affinity ``A = D W`` (its order by the Fiedler vector).
     """
-    from gttnet.solvers.xstep import solve_structure  # the X-step is torch-based; imported on use
-
+    if xstep_method not in ("auto", "dense", "sparse"):
+        raise ValueError(f"dloe: xstep_method must be auto, dense or sparse, got {xstep_method!r}")
     unknown = sorted(set(overrides) - set(DLOEParams.__dataclass_fields__))
     if unknown:
         raise ValueError(
@@ -282,18 +313,7 @@ def reconstruct_dloe(
             W = (1.0 - params.w_prior) * W + params.w_prior * W_const
         d = d_step(Xi, W, conv, params)
         A = ((1.0 - params.d_const) * d + params.d_const)[:, None] * W
-        # X_init as a vanishing ridge keeps the solve unique where a joint is unseen in a linked component.
-        X_t = solve_structure(
-            torch.from_numpy(A),
-            centers,
-            rays,
-            vis,
-            lambda1=params.lambda1,
-            lambda2=params.lambda2,
-            method=xstep_method,
-            x_prior=x_init,
-        )
-        X_new = X_t.detach().cpu().numpy() if isinstance(X_t, torch.Tensor) else np.asarray(X_t)
+        X_new = _xstep(A, centers, rays, vis, params, xstep_method, x_init)
         deltas.append(float(np.linalg.norm((X_new - X) * _INCH_PER_M) / (n * obs.n_joints)))
         X = X_new
         if deltas[-1] < params.tol:

@@ -46,9 +46,10 @@ def _method_fields(rec, camera_names=None) -> dict:
 
 
 class MethodChoice(click.Choice):
-    """``click.Choice`` over :func:`gttnet.methods.available_methods`, read when first needed.
+    """``click.Choice`` over the method names (:func:`gttnet.methods.method_names`), read when first needed.
 
-    Reading the registry imports the solvers (and torch); deferring it keeps ``gttnet --help`` fast.
+    The names come without importing any method's module (torch among them), which keeps ``--help`` and the
+    classical methods' start-up fast; a name registered elsewhere loads the whole registry first.
     """
 
     def __init__(self) -> None:
@@ -56,13 +57,24 @@ class MethodChoice(click.Choice):
 
     @property
     def choices(self) -> tuple[Any, ...]:
-        from gttnet.methods import available_methods
+        import sys
 
-        return tuple(available_methods())
+        from gttnet._builtin_methods import BUILTIN_METHODS
+
+        methods = sys.modules.get("gttnet.methods")  # loaded: names registered outside the built-ins too
+        return tuple(sorted(BUILTIN_METHODS)) if methods is None else methods.method_names()
 
     @choices.setter
     def choices(self, value: Any) -> None:  # click.Choice.__init__ assigns it; the registry is the source
         pass
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        """The name as given; one not built in is looked up after every method module has registered."""
+        if value not in self.choices:
+            from gttnet.methods import available_methods
+
+            available_methods()
+        return super().convert(value, param, ctx)
 
 
 def _mpjpe_reconstructed(rec, gt_points) -> float:
@@ -114,9 +126,9 @@ def _window_arg(value: str) -> int | str | None:
 
 
 def _method_default() -> str:
-    from gttnet.methods import available_methods
+    from gttnet._builtin_methods import BUILTIN_METHODS
 
-    return "auto" if "auto" in available_methods() else "dloe"
+    return "auto" if "auto" in BUILTIN_METHODS else "dloe"
 
 
 class _WarningLines(logging.Handler):

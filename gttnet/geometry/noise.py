@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from gttnet.solvers.xstep import noise_aware_lambda2
+from gttnet.solvers.numpy_xstep import noise_aware_lambda2
 
 __all__ = ["MIN_SAMPLES", "auto_lambda2", "stream_noise_px"]
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-import scipy.linalg
 from scipy.sparse import csr_matrix, issparse
 from scipy.sparse.csgraph import connected_components
 
@@ -129,6 +128,8 @@ def _fiedler(S: np.ndarray | csr_matrix) -> np.ndarray:
         S = S.toarray()
     L = np.diag(S.sum(axis=1)) - S
     # Only the two smallest eigenpairs are needed; subset_by_index avoids a full decomposition.
+    import scipy.linalg  # imported on use (0.1 s of start-up)
+
     _, vec = scipy.linalg.eigh(L, subset_by_index=[0, min(1, n - 1)])
     return np.asarray(vec[:, -1])
 
@@ -356,5 +357,7 @@ def spectral_embedding(A: np.ndarray, k: int) -> np.ndarray:
     """
     S = symmetrise(A)
     k = max(1, min(k, S.shape[0]))
+    import scipy.linalg
+
     _, vec = scipy.linalg.eigh(normalised_laplacian(S), subset_by_index=[0, k - 1])
     return np.asarray(vec, dtype=np.float64)

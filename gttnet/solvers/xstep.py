@@ -5,15 +5,13 @@ from __future__ import annotations
 import logging
 from typing import TypeAlias
 
-import numpy as np
 import numpy.typing as npt
 import torch
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from gttnet.errors import SingularStructureError
 from gttnet.solvers._sparse import solve_sparse
 from gttnet.solvers._system import build_system, solve_dense
+from gttnet.solvers.numpy_xstep import check_solvable, noise_aware_lambda2
 
 #: Centres, rays, masks and priors: tensors, or anything ``torch.as_tensor`` takes.
 ArrayIn: TypeAlias = "torch.Tensor | npt.ArrayLike"
@@ -77,44 +75,6 @@ def _structure_matrix(A: torch.Tensor, lambda1: float) -> torch.Tensor:
     return L_out.transpose(-1, -2) @ L_out + lambda1 * L_sym
 
 
-def noise_aware_lambda2(sigma_px: float, f_px: float, depth_m: float, *, prior_std_m: float = 2e-3) -> float:
-    """A finite ray weight lambda2 from the 2-D noise level (maximum a posteriori reasoning).
-
-    A pixel error of ``sigma_px`` moves a point at ``depth_m`` off its ray by about
-    ``s = sigma_px * depth_m / f_px`` metres per image axis. Reading the ray term and the Laplacian term
-    as Gaussian negative log-likelihoods, with ``prior_std_m`` the per-coordinate spread the Laplacian
-    term tolerates, and scaling by ``prior_std_m**2`` gives ``lambda2 = (prior_std_m / s)**2``.
-
-    Calibration (true binary temporal chain, 4 cameras at 3 m, f = 1000 px, tests/fixtures/scenes.py):
-    the best lambda2 over a 1e2..3e-2 grid is ~0.1-0.3 at 1 px, 0.1 at 2 px, 0.03-0.1 at 3 px and
-    <= 0.03 at 5 px, which the default ``prior_std_m = 2 mm`` tracks (0.44, 0.11, 0.05, 0.018). The
-    true ``L_out x`` residual there is only 0.4 mm rms: the effective spread is larger because
-    neighbouring images' noise is correlated through the solve. MPJPE pinned -> noise-aware:
-    4.6 -> 2.6 mm (1 px), 9.1 -> 4.2 mm (2 px), 13.6 -> 5.7 mm (3 px), 22.7 -> 9.2 mm (5 px).
-    Recalibrate on real motion (faster than the synthetic body) before relying on the constant.
-    For affinities whose rows are not O(1) (e.g. soft-max weights), scale ``prior_std_m`` by the row sum.
-
-    Args:
-        sigma_px: Std of the 2-D keypoint noise, pixels (> 0).
-        f_px: Focal length, pixels.
-        depth_m: Typical camera-to-subject distance, metres.
-        prior_std_m: Std of the Laplacian residual of the true motion, metres.
-
-    Returns:
-        lambda2 (dimensionless, same units as the Laplacian terms).
-
-    Example:
-        >>> round(noise_aware_lambda2(1.0, 1000.0, 3.0, prior_std_m=3e-3), 6)
-        1.0
-    """
-    if sigma_px <= 0 or f_px <= 0 or depth_m <= 0 or prior_std_m <= 0:
-        raise ValueError(
-            f"sigma_px, f_px, depth_m and prior_std_m must be > 0, got {sigma_px}, {f_px}, {depth_m}, {prior_std_m}"
-        )
-    s = sigma_px * depth_m / f_px
-    return float((prior_std_m / s) ** 2)
-
-
 def _as_inputs(
     A: torch.Tensor, centers: ArrayIn, rays: ArrayIn, visible: ArrayIn, x_prior: ArrayIn | None
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None, bool]:
@@ -161,31 +121,10 @@ def _as_inputs(
 
 
 def _check_solvable(A: torch.Tensor, rays: torch.Tensor, vis: torch.Tensor, lambda1: float) -> None:
-    """Raise SingularStructureError where a graph component does not pin down a joint.
-
-    A component of the (undirected) link graph fixes joint p only if its observed rays of p span at
-    least two directions; otherwise the solution can slide (translation / depth) at zero cost.
-    """
-    if lambda1 == 0:
-        log.debug("lambda1 = 0: solvability checked on undirected components, which may be optimistic")
-    Ab = (A.detach() != 0).cpu().numpy()
-    r = rays.detach().double().cpu().numpy()
-    v = vis.cpu().numpy()
-    for b in range(Ab.shape[0]):
-        ncomp, label = connected_components(csr_matrix(Ab[b] | Ab[b].T), directed=False)
-        rr = np.where(v[b][..., None], r[b], 0.0)
-        S = np.zeros((ncomp, r.shape[2], 3, 3))
-        np.add.at(S, label, np.einsum("nja,njb->njab", rr, rr))
-        tr = np.trace(S, axis1=-2, axis2=-1)
-        e2 = 0.5 * (tr**2 - np.sum(S * S, axis=(-2, -1)))
-        bad = np.argwhere(e2 <= 1e-10)
-        if bad.size:
-            c, p = bad[0]
-            size = int(np.sum(label == c))
-            raise SingularStructureError(
-                f"X-step is singular: joint {p} is observed along fewer than two ray directions in a linked "
-                f"component of {size} images (batch {b}); pass x_prior (e.g. X_init) to regularise"
-            )
+    """Raise SingularStructureError where a graph component does not pin down a joint (see ``numpy_xstep``)."""
+    check_solvable(
+        (A.detach() != 0).cpu().numpy(), rays.detach().double().cpu().numpy(), vis.cpu().numpy(), lambda1
+    )
 
 
 def _solve(

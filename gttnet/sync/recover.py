@@ -30,7 +30,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from gttdata.capture.views import Observations
 from gttnet.errors import GttNetError
@@ -170,6 +169,8 @@ def _recover(
         return np.stack(cols, axis=1)
 
     x_scale = np.concatenate([np.full(v - 1, period), np.full(v - 1 if drift else 0, 100.0)])
+    from scipy.optimize import least_squares  # imported on use (0.1-0.2 s of start-up)
+
     res = least_squares(fun, p0, jac=jac, loss="soft_l1", f_scale=f_scale_px, x_scale=x_scale, max_nfev=50)
     o, d = ref.unpack(res.x)
     ref.residuals(res.x)

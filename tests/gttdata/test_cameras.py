@@ -249,3 +249,17 @@ def test_bad_rig_file_raises_one_line(tmp_path, text, match):
 def test_missing_rig_file(tmp_path):
     with pytest.raises(RigError, match="not found"):
         CameraRig.load(tmp_path / "nope.toml")
+
+
+def test_rotation_from_vector_matches_opencv():
+    # The rig reader's Rodrigues formula in numpy (OpenCV is not loaded to read a calibration).
+    import cv2
+
+    from gttdata.cameras import rotation_from_vector
+
+    rng = np.random.default_rng(4)
+    for scale in (0.0, 1e-9, 1e-3, 1.0, 3.1):
+        r = rng.normal(size=3) * scale
+        np.testing.assert_allclose(rotation_from_vector(r), cv2.Rodrigues(r.reshape(3, 1))[0], atol=1e-14)
+    with pytest.raises(ValueError, match="finite"):
+        rotation_from_vector(np.array([np.nan, 0.0, 0.0]))

@@ -34,6 +34,28 @@ def test_available_methods():
         assert methods[name] == needs
 
 
+def test_builtin_method_table_names_each_module_that_registers():
+    """``BUILTIN_METHODS`` (lookup imports one module) lists exactly the built-ins, each with its module."""
+    import subprocess
+    import sys
+
+    from tests._subprocess import repo_env
+
+    code = (
+        "import json\nfrom gttnet.methods import BUILTIN_METHODS, available_methods, method_spec\n"
+        "available_methods()\n"
+        "print(json.dumps({n: method_spec(n).fn.__module__ for n in available_methods()}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=repo_env(), check=True
+    )
+    import json
+
+    from gttnet.methods import BUILTIN_METHODS
+
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == BUILTIN_METHODS
+
+
 @pytest.mark.parametrize(("method", "seq"), [("dct", "partial"), ("dct", "none"), ("hpf", "partial")])
 def test_sequencing_refused(scene, method, seq):
     obs, _ = make_view(scene, seq)

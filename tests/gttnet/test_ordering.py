@@ -196,3 +196,16 @@ def test_pose_graph_affinity_links_k_per_image_and_refuses_nan():
     X[3, 1, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         pose_graph_affinity(X, k=5)
+
+
+@pytest.mark.parametrize("n", [2, 3, 16, 17, 301, 2048])
+def test_kendall_tau_of_rankings_matches_scipy(n):
+    # Rankings without ties take the O(N log^2 N) inversion count, not scipy.stats; ties still go to scipy.
+    from scipy.stats import kendalltau
+
+    rng = np.random.default_rng(n)
+    a = rng.permutation(n)
+    for b in (rng.permutation(n), np.argsort(np.argsort(a + rng.normal(0.0, n / 10, n))), a[::-1].copy()):
+        assert kendall_tau(a, b) == pytest.approx(abs(kendalltau(a, b).statistic), abs=1e-12)
+    tied = np.minimum(a, n // 2)
+    assert kendall_tau(tied, a) == pytest.approx(abs(kendalltau(tied, a).statistic), abs=1e-12)

@@ -340,3 +340,45 @@ def test_sparse_assembly_matches_the_entrywise_definition(seed):
     owner[pos[act]] = np.argwhere(act)[:, 0]
     r, c = H.nonzero()
     assert np.all(owner[r] == owner[c])
+
+
+@pytest.mark.parametrize("lambda2", [None, 30.0, "per-image"])
+@pytest.mark.parametrize("prior", [False, True])
+def test_numpy_xstep_matches_the_torch_paths(lambda2, prior):
+    # The classical methods' torch-free X-step solves the same systems as both torch paths.
+    from gttnet.solvers.numpy_xstep import solve_structure_np
+
+    A, C, r, vis = _random_case(seed=12, n=14, j=4, missing=((0, 1), (4, 2), (5, 2), (9, 0)))
+    lam = np.linspace(5.0, 50.0, 14) if lambda2 == "per-image" else lambda2
+    kw = {"lambda1": 0.05, "lambda2": lam, "x_prior": 0.1 * np.ones((14, 4, 3)) if prior else None}
+    X = solve_structure_np(A.numpy(), C, 1.7 * r, vis, **kw)
+    assert isinstance(X, np.ndarray) and X.shape == (14, 4, 3)
+    for method in ("sparse", "dense"):
+        ref = solve_structure(A, C, r, vis, method=method, **kw).numpy()
+        np.testing.assert_allclose(X, ref, rtol=0, atol=1e-9)
+    # batched inputs give the per-item solutions
+    Xb = solve_structure_np(np.stack([A.numpy(), 2.0 * A.numpy()]), C, r, vis, **kw)
+    np.testing.assert_allclose(Xb[0], X, rtol=0, atol=1e-12)
+    ref2 = solve_structure(2.0 * A, C, r, vis, method="sparse", **kw).numpy()
+    np.testing.assert_allclose(Xb[1], ref2, rtol=0, atol=1e-9)
+
+
+def test_numpy_xstep_guards():
+    from gttnet.solvers.numpy_xstep import solve_structure_np
+
+    A, C, r, vis = _random_case(seed=3)
+    A = A.numpy()
+    with pytest.raises(ValueError, match="non-negative"):
+        solve_structure_np(-A, C, r, vis)
+    with pytest.raises(ValueError, match="expected centers"):
+        solve_structure_np(A[:5, :5], C, r, vis)
+    with pytest.raises(ValueError, match="lambda2"):
+        solve_structure_np(A, C, r, vis, lambda2=-1.0)
+    r_bad = r.copy()
+    r_bad[2, 1] = 0.0
+    with pytest.raises(ValueError, match="non-zero ray"):
+        solve_structure_np(A, C, r_bad, vis)
+    # one camera sees joint 0 in a component cut off from the rest: its depth is free
+    C2, r2 = _skew_pair()
+    with pytest.raises(SingularStructureError):
+        solve_structure_np(np.zeros((2, 2)), C2, r2, np.ones((2, 1), bool))
