@@ -79,6 +79,15 @@ class CalibrationError(RigError):
     """A calibration file is malformed, in unknown units, or disagrees with the keypoint sources."""
 
 
+def _out_of_memory(detail: str) -> str:
+    """The one line for a run that ran out of memory (``detail``: the allocator's own words, if any)."""
+    what = f" ({detail.strip()})" if detail.strip() else ""
+    return (
+        f"out of memory{what}: the machine (or its memory limit) cannot hold this run; "
+        "split the input or raise the limit"
+    )
+
+
 def friendly_errors(fn):
     """Decorator: turn library errors (and common OS errors) into one readable ClickException line."""
 
@@ -95,5 +104,11 @@ def friendly_errors(fn):
 
             reason = describe_os_error(exc)
             raise click.ClickException(f"{exc.filename}: {reason}" if exc.filename else reason) from exc
+        except MemoryError as exc:  # numpy's _ArrayMemoryError too: one line, never a traceback
+            raise click.ClickException(_out_of_memory(str(exc))) from exc
+        except RuntimeError as exc:  # torch's CPU allocator and CUDA report running out as a RuntimeError
+            if "can't allocate memory" not in str(exc) and "out of memory" not in str(exc).lower():
+                raise
+            raise click.ClickException(_out_of_memory(str(exc).splitlines()[0])) from exc
 
     return wrapper

@@ -6,6 +6,8 @@ Every method's cost grows with the square of the image count (pairwise pseudo-tr
 be placed roughly in time, so the recording is cut into overlapping windows, each window is
 reconstructed with the chosen method as an ordinary capture of the same sequencing condition, and the
 windows are blended in their overlaps. Time and memory are then linear in the number of images.
+Without sequencing the windows follow the poses' own order instead (:func:`pose_times`, from sparse
+neighbour searches only), so memory and time grow as N log N there too.
 
 Placing images in time (:func:`approximate_times`):
 
@@ -48,6 +50,7 @@ from gttnet.methods import Reconstruction, blank_unobserved, check_sequencing, m
 
 __all__ = [
     "AUTO_MIN_IMAGES",
+    "pose_times",
     "synced_times",
     "WindowPlan",
     "approximate_times",
@@ -137,6 +140,24 @@ def synced_times(obs: Observations) -> np.ndarray:
     return clock_times(obs, recover_clocks(obs))
 
 
+def pose_times(obs: Observations, *, k: int = 16) -> np.ndarray:
+    """Where each image of an order-free capture falls in the poses' own order, shape ``(N,)`` (ranks).
+
+    Without sequencing nothing times the images, so windows are cut along the spectral order of the
+    k-nearest-neighbour graph over the pseudo-triangulated poses (the order GTT-Net and ``stream-sync``
+    derive under ``none``). Every step is sparse: the k-d tree candidate search
+    (:func:`gttnet.geometry.candidates.candidate_pseudo_triangulate`), a k-nearest-neighbour pose graph and
+    a Lanczos Fiedler vector, so memory and time grow as N log N; an image's window then holds the images
+    whose poses are nearest in that order, which are the neighbours a whole-capture solve would link.
+    """
+    from gttnet.geometry.candidates import candidate_pseudo_triangulate
+    from gttnet.geometry.ordering import pose_graph_affinity, spectral_order
+
+    x = candidate_pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id).X_init
+    A = pose_graph_affinity(np.nan_to_num(np.asarray(x, dtype=np.float64)), k=k, sparse=True)
+    return np.asarray(spectral_order(A), dtype=np.float64)
+
+
 def auto_window(obs: Observations) -> tuple[int, int]:
     """``(length, overlap)`` of automatic windows: ``80 V`` images for V cameras, a quarter overlapping."""
     v = max(int(np.unique(obs.cam_id).size), 1)
@@ -222,14 +243,14 @@ def reconstruct_windowed(
     """Reconstruct a long capture window by window with a registered method, then stitch the windows.
 
     Args:
-        obs: Observations under ``partial`` or ``full`` sequencing (``none`` is solved in one piece).
+        obs: Observations of any sequencing; under ``none`` the windows follow :func:`pose_times`.
         method: Registered method name.
         window: Images per window, or ``"auto"`` (:func:`auto_window`, and one piece for captures of at
             most :data:`AUTO_MIN_IMAGES` images).
         overlap: Images shared by consecutive windows (default: a quarter of the window).
         times: Approximate time of each image, shape ``(N,)`` (e.g. from a clocks file); default: the
             timestamps under ``full``, :func:`synced_times` under ``partial`` (falling back to
-            :func:`approximate_times` when clock recovery fails).
+            :func:`approximate_times` when clock recovery fails), :func:`pose_times` under ``none``.
         progress: Show a progress bar with ETA on stderr.
         **options: Options of the method.
 
@@ -242,7 +263,7 @@ def reconstruct_windowed(
     check_sequencing(obs, spec)
     n = obs.n_images
     if window == "auto":
-        if obs.sequencing == "none" or n <= AUTO_MIN_IMAGES:
+        if n <= AUTO_MIN_IMAGES:
             from gttnet.methods import reconstruct
 
             return reconstruct(obs, method, **options)
@@ -261,6 +282,8 @@ def reconstruct_windowed(
         except GttNetError as exc:
             log.warning("clock recovery failed (%s); windows follow each stream's elapsed fraction", exc)
             t_hat, clock = approximate_times(obs), "stream fraction"
+    elif obs.sequencing == "none":
+        t_hat, clock = pose_times(obs), "pose order"
     else:
         t_hat, clock = approximate_times(obs), "timestamps"
     if t_hat.shape != (n,):
