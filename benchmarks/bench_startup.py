@@ -44,6 +44,14 @@ def main() -> None:
         "gttnet --help": [py, "-m", "gttnet", "--help"],
         "gttdata --help": [py, "-m", "gttdata", "--help"],
         "gttnet reconstruct --help": [py, "-m", "gttnet", "reconstruct", "--help"],
+        "gttnet sync --help": [py, "-m", "gttnet", "sync", "--help"],
+        "gttnet train --help": [py, "-m", "gttnet", "train", "--help"],
+        "gttdata generate --help": [py, "-m", "gttdata", "generate", "--help"],
+        "import the DLOE method (no torch)": [
+            py,
+            "-c",
+            "from gttnet.methods import method_spec; method_spec('dloe')",
+        ],
     }
     if args.console_scripts:
         for name in ("gttnet", "gttdata"):
