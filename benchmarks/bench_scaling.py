@@ -11,7 +11,10 @@ end in a fresh process (start-up, loading, reconstruction, report; ``--sequencin
 
 * ``gttnet windowed``: GTT-Net window by window (``--window auto``: one piece up to 2,000 images);
 * ``gttnet whole``: GTT-Net in one piece (``--window off``), up to ``--max-whole`` images;
-* ``pseudo windowed``: pseudo-triangulation window by window.
+* ``pseudo windowed``: pseudo-triangulation window by window;
+* ``auto windowed``: the default method (clock recovery, then the high-pass prior) window by window;
+* ``auto none windowed`` / ``auto none whole``: ``--sequencing none`` (no frame order at all): windows cut
+  along the poses' own order (``gttnet.windowed.pose_times``) against the capture in one piece.
 
 Wall and CPU seconds and peak RSS come from ``os.wait4`` on the child. The table gives medians over
 ``--runs`` runs (min..max), microseconds of wall time per image, that per-image cost as a ratio to the
@@ -38,6 +41,9 @@ CONFIGS = {
     "gttnet windowed": ["--method", "gttnet", "--window", "auto"],
     "gttnet whole": ["--method", "gttnet", "--window", "off"],
     "pseudo windowed": ["--method", "pseudo", "--window", "auto"],
+    "auto windowed": ["--method", "auto", "--window", "auto"],
+    "auto none windowed": ["--sequencing", "none", "--method", "auto", "--window", "auto"],
+    "auto none whole": ["--sequencing", "none", "--method", "auto", "--window", "off"],
 }
 
 
@@ -109,7 +115,7 @@ def main() -> None:
     for size in args.sizes:
         shard = make_shard(size, args.data, args.drift_ppm)
         for name in args.configs.split(","):
-            if name == "gttnet whole" and size > args.max_whole:
+            if name.endswith("whole") and size > args.max_whole:
                 continue
             cmd = [
                 sys.executable,
@@ -117,8 +123,7 @@ def main() -> None:
                 "gttnet",
                 "reconstruct",
                 str(shard),
-                "--sequencing",
-                "partial",
+                *([] if "--sequencing" in CONFIGS[name] else ["--sequencing", "partial"]),
                 *CONFIGS[name],
                 "--json",
                 "--no-progress",
@@ -138,7 +143,8 @@ def main() -> None:
     whole = {size: statistics.median(w) for size, name, w, *_ in rows if name == "gttnet whole"}
     drift = f", clocks drifting up to +-{args.drift_ppm:g} ppm" if args.drift_ppm else ""
     print(
-        f"\n`gttnet reconstruct --sequencing partial` end to end{drift}, {args.runs} runs each; median (min..max)"
+        f"\n`gttnet reconstruct` end to end (--sequencing partial unless the config says none){drift}, "
+        f"{args.runs} runs each, OMP_NUM_THREADS={_env()['OMP_NUM_THREADS']}; median (min..max)"
     )
     print(
         "| images | config | windows | wall s | CPU s | peak RSS MB | us/image | per-image vs smallest | whole / windowed | MPJPE mm |"
