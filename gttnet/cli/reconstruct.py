@@ -446,8 +446,9 @@ def _resolve_input(
     default="auto",
     show_default=True,
     metavar="auto|off|N",
-    help="Windowed reconstruction of long partial/full captures: N images per window (a quarter "
-    "overlapping), auto (80 per camera above 2,000 images), or off (one piece).",
+    help="Windowed reconstruction of long captures: N images per window (a quarter overlapping), auto "
+    "(above 2,000 images 80 per camera; without sequencing 320 per camera, cut along the poses' order), "
+    "or off (one piece).",
 )
 @click.option(
     "--progress/--no-progress", default=True, show_default=True, help="Window progress bar on stderr."
