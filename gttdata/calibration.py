@@ -145,8 +145,9 @@ def read_toml_calibration(path: str | Path, *, units: str | None = None) -> tupl
         rig = CameraRig.from_dict(d, source=str(path))
     except RigError as exc:
         raise CalibrationError(str(exc)) from exc
-    stated = (d.get("metadata") or {}).get("units")
-    if stated is not None and stated not in CALIBRATION_UNITS:
+    meta = d.get("metadata")
+    stated = meta.get("units") if isinstance(meta, dict) else None
+    if stated is not None and (not isinstance(stated, str) or stated not in CALIBRATION_UNITS):
         raise CalibrationError(
             f"{path}: field 'metadata.units' must be one of {', '.join(CALIBRATION_UNITS)}, found {stated!r}"
         )
@@ -191,11 +192,72 @@ def _fs_mat(fs: cv2.FileStorage, key: str, path: Path, required: bool = True) ->
     return np.asarray(m, dtype=np.float64)
 
 
+def _cv_message(exc: BaseException) -> str:
+    """OpenCV's (multi-line) error message in one line; a ``SystemError`` wrapper gives its cause's."""
+    inner = exc.__cause__ or exc.__context__ if isinstance(exc, SystemError) else None
+    return " ".join(str(inner or exc).split())
+
+
+def _fs_open(path: Path) -> cv2.FileStorage:
+    """An OpenCV FileStorage open for reading; a YAML syntax error is one line naming the file."""
+    import cv2
+
+    try:
+        return cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as exc:
+        raise CalibrationError(f"{path}: OpenCV cannot parse this YAML file: {_cv_message(exc)}") from exc
+
+
 def _fs_names(fs: cv2.FileStorage, path: Path) -> list[str]:
     node = fs.getNode("names")
     if node.empty() or not node.isSeq():
         raise CalibrationError(f"{path}: field 'names' (a list of camera names) is missing")
     return [node.at(i).string() or str(int(node.at(i).real())) for i in range(node.size())]
+
+
+def _fs_sized(fs: cv2.FileStorage, key: str, path: Path, sizes: tuple[int, ...], required: bool = True):
+    """:func:`_fs_mat` checked to hold one of ``sizes`` finite numbers (None when absent and not required)."""
+    m = _fs_mat(fs, key, path, required)
+    if m is None:
+        return None
+    if m.size not in sizes or not np.all(np.isfinite(m)):
+        want = " or ".join(str(n) for n in sizes)
+        raise CalibrationError(
+            f"{path}: field {key!r}: expected {want} finite numbers, found {m.ravel()[:9].tolist()}"
+        )
+    return m
+
+
+def _easymocap_cameras(
+    fi: cv2.FileStorage, fe: cv2.FileStorage, intri: Path, extri: Path, scale: float
+) -> list:
+    """The cameras of an opened EasyMocap ``intri.yml`` / ``extri.yml`` pair (translations times ``scale``)."""
+    import cv2
+
+    names = _fs_names(fi, intri)
+    cams = []
+    for n in names:
+        K = _fs_sized(fi, f"K_{n}", intri, (9,)).reshape(3, 3)
+        dist = _fs_sized(fi, f"dist_{n}", intri, (4, 5, 8, 12, 14), required=False)
+        rot = _fs_sized(fe, f"Rot_{n}", extri, (9,), required=False)
+        if rot is None:
+            rot, _ = cv2.Rodrigues(_fs_sized(fe, f"R_{n}", extri, (3,)).reshape(3, 1))
+        T = np.eye(4)
+        T[:3, :3] = rot.reshape(3, 3)
+        T[:3, 3] = _fs_sized(fe, f"T_{n}", extri, (3,)).reshape(3) * scale
+        h = _fs_sized(fi, f"H_{n}", intri, (1,), required=False)
+        w = _fs_sized(fi, f"W_{n}", intri, (1,), required=False)
+        size = (
+            (int(w.ravel()[0]), int(h.ravel()[0]))
+            if h is not None and w is not None
+            else (int(round(2 * K[0, 2])), int(round(2 * K[1, 2])))
+        )
+        d = tuple(np.zeros(5)) if dist is None else tuple(float(v) for v in dist.ravel())
+        try:
+            cams.append(Camera(K=K, cam_from_world=T, image_size=size, name=n, dist=d))
+        except RigError as exc:
+            raise CalibrationError(f"{intri}/{extri.name}: {exc}") from exc
+    return cams
 
 
 def read_easymocap(
@@ -217,41 +279,15 @@ def read_easymocap(
             raise CalibrationError(f"{p}: calibration file not found")
     import cv2
 
-    fi = cv2.FileStorage(str(intri), cv2.FILE_STORAGE_READ)
-    fe = cv2.FileStorage(str(extri), cv2.FILE_STORAGE_READ)
+    fi, fe = _fs_open(intri), _fs_open(extri)
     if not fi.isOpened() or not fe.isOpened():
         raise CalibrationError(f"{intri if not fi.isOpened() else extri}: OpenCV cannot read this YAML file")
-    names = _fs_names(fi, intri)
-    cams = []
-    for n in names:
-        K = _fs_mat(fi, f"K_{n}", intri)
-        dist = _fs_mat(fi, f"dist_{n}", intri, required=False)
-        rot = _fs_mat(fe, f"Rot_{n}", extri, required=False)
-        if rot is None:
-            rvec = _fs_mat(fe, f"R_{n}", extri)
-            rot, _ = cv2.Rodrigues(rvec.reshape(3, 1))
-        T = np.eye(4)
-        T[:3, :3] = rot.reshape(3, 3)
-        T[:3, 3] = _fs_mat(fe, f"T_{n}", extri).reshape(3) * CALIBRATION_UNITS[units]
-        if K is None or K.shape != (3, 3):
-            raise CalibrationError(
-                f"{intri}: field 'K_{n}' must be a 3x3 matrix, found {None if K is None else K.shape}"
-            )
-        h = _fs_mat(fi, f"H_{n}", intri, required=False)
-        w = _fs_mat(fi, f"W_{n}", intri, required=False)
-        size = (
-            (int(w.ravel()[0]), int(h.ravel()[0]))
-            if h is not None and w is not None
-            else (
-                int(round(2 * K[0, 2])),
-                int(round(2 * K[1, 2])),
-            )
-        )
-        d = tuple(np.zeros(5)) if dist is None else tuple(float(v) for v in dist.ravel())
-        try:
-            cams.append(Camera(K=K, cam_from_world=T, image_size=size, name=n, dist=d))
-        except RigError as exc:
-            raise CalibrationError(f"{intri}/{extri.name}: {exc}") from exc
+    try:
+        cams = _easymocap_cameras(fi, fe, intri, extri, CALIBRATION_UNITS[units])
+    except cv2.error as exc:  # a node of the wrong kind: OpenCV's multi-line message in one line
+        raise CalibrationError(
+            f"{intri} / {extri.name}: OpenCV cannot read a field: {_cv_message(exc)}"
+        ) from exc
     fi.release()
     fe.release()
     return CameraRig(tuple(cams)), units

@@ -260,13 +260,16 @@ class CameraRig:
                 dist = tuple(float(v) for v in np.asarray(tab.get("distortions", [0.0] * 5)).ravel())
                 size = tuple(int(round(float(v))) for v in tab["size"])
                 K = np.asarray(tab["matrix"], dtype=np.float64)
-            except (ValueError, TypeError) as exc:
+            except (ValueError, TypeError, OverflowError) as exc:
                 raise RigError(f"{source}: [{key}] has a malformed field: {exc}") from exc
             if len(size) != 2:
                 raise RigError(f"{source}: [{key}] field 'size' must be [width, height], found {tab['size']}")
-            cams.append(
-                Camera(K=K, cam_from_world=T, image_size=size, name=str(tab.get("name", key)), dist=dist)
-            )
+            try:
+                cams.append(
+                    Camera(K=K, cam_from_world=T, image_size=size, name=str(tab.get("name", key)), dist=dist)
+                )
+            except RigError as exc:
+                raise RigError(f"{source}: [{key}] {exc}") from exc
         if not cams:
             raise RigError(f"{source}: no camera tables found")
         return cls(tuple(cams))

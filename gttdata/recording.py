@@ -162,63 +162,94 @@ def _path(base: Path, value: object, where: str, src: Path) -> Path:
     return p if p.is_absolute() else base / p
 
 
+def _positive_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < float("inf")
+
+
+def _choice(path: Path, d: dict, key: str, allowed: tuple[str, ...], default: str | None) -> str | None:
+    value = d.get(key, default)
+    if value is not None and (not isinstance(value, str) or value not in allowed):
+        raise KeypointFormatError(
+            f"{path}: field {key!r} must be one of {', '.join(allowed)}, found {value!r}"
+        )
+    return value
+
+
+def _project_camera(path: Path, i: int, c: object) -> CameraInput:
+    if not isinstance(c, dict) or "name" not in c or "keypoints" not in c:
+        raise KeypointFormatError(f"{path}: cameras[{i}] needs fields 'name' and 'keypoints'")
+    name = c["name"]
+    if isinstance(name, bool) or not isinstance(name, str | int) or name == "":
+        raise KeypointFormatError(f"{path}: cameras[{i}].name must be a camera name, found {name!r}")
+    fps = c.get("fps")
+    if fps is not None and not _positive_number(fps):
+        raise KeypointFormatError(f"{path}: cameras[{i}].fps must be a positive number, found {fps!r}")
+    ts = c.get("timestamps")
+    return CameraInput(
+        name=str(name),
+        keypoints=_path(path.parent, c["keypoints"], f"cameras[{i}].keypoints", path),
+        fps=None if fps is None else float(fps),
+        timestamps=None if ts is None else _path(path.parent, ts, f"cameras[{i}].timestamps", path),
+    )
+
+
 def load_project(path: str | Path) -> RecordingSpec:
     """Read a project file (``.toml`` or ``.yaml``/``.yml``, layout in the module docstring).
+
+    YAML project files are read like recipes (:func:`gttdata.recipe.yamlio.load_yaml`): a key written
+    twice is refused.
 
     Raises:
         KeypointFormatError: Unparseable file or a missing/invalid field (named).
     """
-    import yaml  # imported on use: a TOML project never needs it
+    import yaml  # imported on use, not at start-up
+
+    from gttdata.calibration import CALIBRATION_UNITS
+    from gttdata.detectors import FORMATS
+    from gttdata.recipe.yamlio import load_yaml, yaml_error_line
 
     path = Path(path)
     try:
         text = path.read_text()
-        d = yaml.safe_load(text) if path.suffix.lower() in (".yaml", ".yml") else tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        d = load_yaml(text) if path.suffix.lower() in (".yaml", ".yml") else tomllib.loads(text)
+    except yaml.YAMLError as exc:
+        raise KeypointFormatError(f"{path}: cannot parse project file: {yaml_error_line(exc)}") from exc
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise KeypointFormatError(f"{path}: cannot parse project file: {exc}") from exc
     if not isinstance(d, dict):
         raise KeypointFormatError(f"{path}: a project file must be a table, found {type(d).__name__}")
-    base = path.parent
     for key in ("calibration", "cameras"):
         if key not in d:
             raise KeypointFormatError(f"{path}: field {key!r} is missing")
     if not isinstance(d["cameras"], list) or not d["cameras"]:
         raise KeypointFormatError(f"{path}: field 'cameras' must be a non-empty list of tables")
-    cams = []
-    for i, c in enumerate(d["cameras"]):
-        if not isinstance(c, dict) or "name" not in c or "keypoints" not in c:
-            raise KeypointFormatError(f"{path}: cameras[{i}] needs fields 'name' and 'keypoints'")
-        fps = c.get("fps")
-        if fps is not None and (not isinstance(fps, int | float) or fps <= 0):
-            raise KeypointFormatError(f"{path}: cameras[{i}].fps must be a positive number, found {fps!r}")
-        ts = c.get("timestamps")
-        cams.append(
-            CameraInput(
-                name=str(c["name"]),
-                keypoints=_path(base, c["keypoints"], f"cameras[{i}].keypoints", path),
-                fps=None if fps is None else float(fps),
-                timestamps=None if ts is None else _path(base, ts, f"cameras[{i}].timestamps", path),
-            )
-        )
-    clock = d.get("clock", "per-camera")
-    if clock not in CLOCKS:
-        raise KeypointFormatError(
-            f"{path}: field 'clock' must be one of {', '.join(CLOCKS)}, found {clock!r}"
-        )
+    cams = [_project_camera(path, i, c) for i, c in enumerate(d["cameras"])]
+    clock = _choice(path, d, "clock", CLOCKS, "per-camera")
+    units = _choice(path, d, "calibration_units", tuple(CALIBRATION_UNITS), None)
+    fmt = _choice(path, d, "keypoint_format", ("auto", *FORMATS), "auto")
     conf = d.get("min_confidence", 0.1)
-    if not isinstance(conf, int | float) or not 0 <= conf <= 1:
+    if isinstance(conf, bool) or not isinstance(conf, int | float) or not 0 <= conf <= 1:
         raise KeypointFormatError(f"{path}: field 'min_confidence' must be in [0, 1], found {conf!r}")
+    skeleton = d.get("skeleton")
+    if skeleton is not None and not (isinstance(skeleton, dict) or (isinstance(skeleton, str) and skeleton)):
+        raise KeypointFormatError(
+            f"{path}: field 'skeleton' must be a skeleton name or table, found {skeleton!r}"
+        )
+    if isinstance(skeleton, dict):
+        Skeleton.from_dict(
+            skeleton, source=f"{path}: field 'skeleton'"
+        )  # checked here, where the file is known
     return RecordingSpec(
-        calibration=_path(base, d["calibration"], "calibration", path),
+        calibration=_path(path.parent, d["calibration"], "calibration", path),
         cameras=tuple(cams),
-        calibration_units=d.get("calibration_units"),
-        clock=clock,
-        keypoint_format=str(d.get("keypoint_format", "auto")),
+        calibration_units=units,
+        clock=str(clock),
+        keypoint_format=str(fmt),
         min_confidence=float(conf),
-        skeleton=d.get("skeleton"),
+        skeleton=skeleton,
         ground_truth=None
         if "ground_truth" not in d
-        else _path(base, d["ground_truth"], "ground_truth", path),
+        else _path(path.parent, d["ground_truth"], "ground_truth", path),
     )
 
 

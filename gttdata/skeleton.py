@@ -111,7 +111,11 @@ class Skeleton:
             raise ValueError(f"skeleton {self.name!r}: joint names must be unique")
         if not self.mirror:
             object.__setattr__(self, "mirror", _mirror_by_name(self.joint_names))
-        if len(self.mirror) != j or any(self.mirror[self.mirror[i]] != i for i in range(j)):
+        if (
+            len(self.mirror) != j
+            or any(not 0 <= m < j for m in self.mirror)
+            or any(self.mirror[self.mirror[i]] != i for i in range(j))
+        ):
             raise ValueError(f"skeleton {self.name!r}: mirror must be an involution of length {j}")
 
     @property
@@ -179,7 +183,7 @@ class Skeleton:
                 mirror=tuple(int(m) for m in d.get("mirror", ())),
                 extra_bones=tuple((int(a), int(b)) for a, b in d.get("extra_bones", ())),
             )
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise MotionFormatError(f"{source}: invalid skeleton: {exc}") from exc
 
 

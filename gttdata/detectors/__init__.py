@@ -13,6 +13,7 @@ MMPose predictions. ``write_keypoints`` writes the OpenPose and DeepLabCut layou
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,7 @@ __all__ = [
     "detect_format",
     "candidate_sets",
     "keypoint_set_for",
+    "read_json",
     "read_keypoints",
     "write_keypoints",
 ]
@@ -73,16 +75,30 @@ def keypoint_set_for(n_joints: int) -> tuple[str, tuple[str, ...]]:
     return "", tuple(f"kp{i}" for i in range(int(n_joints)))
 
 
+def read_json(path: Path) -> object:
+    """Parse a detector's JSON file; invalid, binary or absurdly nested text is one line naming the file.
+
+    Raises:
+        KeypointFormatError: The file is not valid UTF-8 JSON.
+    """
+    try:
+        return json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise KeypointFormatError(f"{path}: not valid JSON: {exc}") from exc
+    except RecursionError:
+        raise KeypointFormatError(f"{path}: not valid JSON: nested too deeply") from None
+
+
 @dataclass(frozen=True)
 class Keypoints2D:
     """The 2-D detections of one camera stream.
 
     Args:
         xy: Joint positions, pixels (origin at the top-left corner), shape ``(F, J, 2)`` float64; NaN
-            where the detector found nothing.
+            where the detector found nothing. Infinite values are refused (:class:`KeypointFormatError`).
         score: Detector confidence in ``[0, 1]``, shape ``(F, J)`` float64; NaN where nothing was found.
-        frame: Video frame number of each row, shape ``(F,)`` int64, strictly increasing (gaps are
-            frames without a file or row).
+        frame: Video frame number of each row, shape ``(F,)`` int64, ``>= 0`` and strictly increasing
+            (gaps are frames without a file or row).
         joint_names: Names of the J joints, in column order.
         keypoint_set: Name of the detector keypoint set (a key of :data:`KEYPOINT_SETS`) or ``""``.
         source: File or folder read, for messages.
@@ -107,6 +123,16 @@ class Keypoints2D:
                 f"{self.source}: inconsistent keypoints: xy {xy.shape}, score {score.shape}, frame "
                 f"{frame.shape}, {len(self.joint_names)} joint names"
             )
+        inf = np.isinf(xy).any(axis=-1) | np.isinf(score)
+        if inf.any():
+            r, j = (int(v[0]) for v in np.nonzero(inf))
+            raise KeypointFormatError(
+                f"{self.source}: frame {frame[r]} joint {self.joint_names[j]!r}: expected finite pixel "
+                f"coordinates and score (NaN marks a missing joint), found {xy[r, j].tolist()} "
+                f"score {score[r, j]}"
+            )
+        if f > 0 and frame.min() < 0:
+            raise KeypointFormatError(f"{self.source}: frame numbers must be >= 0, found {int(frame.min())}")
         if f > 1 and np.any(np.diff(frame) <= 0):
             k = int(np.flatnonzero(np.diff(frame) <= 0)[0])
             raise KeypointFormatError(

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gttdata.detectors import Keypoints2D, keypoint_set_for
+from gttdata.detectors import Keypoints2D, keypoint_set_for, read_json
 from gttdata.errors import KeypointFormatError, NoDetectionsError
 
 __all__ = ["SUMMARY", "read_coco", "write_coco"]
@@ -29,16 +29,36 @@ __all__ = ["SUMMARY", "read_coco", "write_coco"]
 SUMMARY = "COCO keypoint results or MMPose predictions, one .json per camera"
 
 
+def _frame(path: Path, value: object, where: str) -> int:
+    """A frame number (``image_id``, ``frame_id``): an integer in ``[0, 2^62)``."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        if float(value).is_integer() and 0 <= value < 2**62:
+            return int(value)
+    raise KeypointFormatError(f"{path}: {where}: expected a frame number (an integer >= 0), found {value!r}")
+
+
+def _numbers(path: Path, value: object, where: str) -> np.ndarray:
+    """A numeric array (float64); strings, nulls, booleans and ragged lists are one line naming the field."""
+    if isinstance(value, bool | str) or value is None:
+        raise KeypointFormatError(f"{path}: {where}: expected numbers, found {value!r}")
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise KeypointFormatError(f"{path}: {where}: expected a rectangular list of numbers") from None
+    if a.dtype != np.float64 or any(
+        isinstance(v, bool | str) for v in np.asarray(value, dtype=object).ravel()
+    ):
+        raise KeypointFormatError(f"{path}: {where}: expected numbers, found a string or boolean")
+    return a
+
+
 def _coco_rows(path: Path, entries: list) -> dict[int, tuple[np.ndarray, np.ndarray, float]]:
     best: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
     for i, e in enumerate(entries):
         if not isinstance(e, dict) or "keypoints" not in e or "image_id" not in e:
             raise KeypointFormatError(f"{path}: entry {i} needs fields 'image_id' and 'keypoints'")
-        try:
-            a = np.asarray(e["keypoints"], dtype=np.float64)
-            frame = int(e["image_id"])
-        except (TypeError, ValueError) as exc:
-            raise KeypointFormatError(f"{path}: entry {i} field 'keypoints' or 'image_id': {exc}") from exc
+        a = _numbers(path, e["keypoints"], f"entry {i} field 'keypoints'")
+        frame = _frame(path, e["image_id"], f"entry {i} field 'image_id'")
         if a.ndim != 1 or a.size == 0 or a.size % 3:
             raise KeypointFormatError(
                 f"{path}: entry {i} field 'keypoints' must be a flat list of 3*J numbers, found {a.shape}"
@@ -47,7 +67,12 @@ def _coco_rows(path: Path, entries: list) -> dict[int, tuple[np.ndarray, np.ndar
         s = a[:, 2]
         if "score" not in e and np.all(np.isin(s, (0.0, 1.0, 2.0))):
             s = s / 2.0  # ground-truth visibility flags
-        total = float(e.get("score", np.nansum(s)))
+        total = float(_numbers(path, e["score"], f"entry {i} field 'score'").sum()) if "score" in e else None
+        if total is not None and not np.isfinite(total):
+            raise KeypointFormatError(
+                f"{path}: entry {i} field 'score': expected a number, found {e['score']!r}"
+            )
+        total = float(np.nansum(s)) if total is None else total
         if frame not in best or total > best[frame][2]:
             best[frame] = (a[:, :2], s, total)
     return best
@@ -55,22 +80,23 @@ def _coco_rows(path: Path, entries: list) -> dict[int, tuple[np.ndarray, np.ndar
 
 def _mmpose_rows(path: Path, doc: dict) -> dict[int, tuple[np.ndarray, np.ndarray, float]]:
     best: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+    if not isinstance(doc["instance_info"], list):
+        raise KeypointFormatError(
+            f"{path}: field 'instance_info': expected a list of frames, found {type(doc['instance_info']).__name__}"
+        )
     for i, fr in enumerate(doc["instance_info"]):
-        if not isinstance(fr, dict) or "instances" not in fr:
-            raise KeypointFormatError(f"{path}: instance_info[{i}] needs field 'instances'")
-        frame = int(fr.get("frame_id", i))
+        if not isinstance(fr, dict) or not isinstance(fr.get("instances"), list):
+            raise KeypointFormatError(f"{path}: instance_info[{i}] needs field 'instances' (a list)")
+        frame = _frame(path, fr.get("frame_id", i), f"instance_info[{i}].frame_id")
         for k, inst in enumerate(fr["instances"]):
-            try:
-                xy = np.asarray(inst["keypoints"], dtype=np.float64)
-                s = np.asarray(inst["keypoint_scores"], dtype=np.float64)
-            except (KeyError, TypeError, ValueError) as exc:
+            where = f"instance_info[{i}].instances[{k}]"
+            if not isinstance(inst, dict) or "keypoints" not in inst or "keypoint_scores" not in inst:
+                raise KeypointFormatError(f"{path}: {where} needs fields 'keypoints' and 'keypoint_scores'")
+            xy = _numbers(path, inst["keypoints"], f"{where}.keypoints")
+            s = _numbers(path, inst["keypoint_scores"], f"{where}.keypoint_scores")
+            if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] == 0 or s.shape != (xy.shape[0],):
                 raise KeypointFormatError(
-                    f"{path}: instance_info[{i}].instances[{k}] needs numeric 'keypoints' and "
-                    f"'keypoint_scores': {exc}"
-                ) from exc
-            if xy.ndim != 2 or xy.shape[1] != 2 or s.shape != (xy.shape[0],):
-                raise KeypointFormatError(
-                    f"{path}: instance_info[{i}].instances[{k}]: 'keypoints' must be (J, 2) and "
+                    f"{path}: {where}: 'keypoints' must be (J, 2) and "
                     f"'keypoint_scores' (J,), found {xy.shape} and {s.shape}"
                 )
             total = float(np.nansum(s))
@@ -86,15 +112,13 @@ def read_coco(path: Path) -> Keypoints2D:
         KeypointFormatError: Unknown layout, missing fields, or joint counts that change.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise KeypointFormatError(f"{path}: not valid JSON: {exc}") from exc
+    doc = read_json(path)
     names = None
     if isinstance(doc, dict) and "instance_info" in doc:
         rows = _mmpose_rows(path, doc)
-        id2name = (doc.get("meta_info") or {}).get("keypoint_id2name")
-        if isinstance(id2name, dict):
+        meta = doc.get("meta_info")
+        id2name = meta.get("keypoint_id2name") if isinstance(meta, dict) else None
+        if isinstance(id2name, dict) and all(str(k).isdigit() for k in id2name):
             names = tuple(str(id2name[k]) for k in sorted(id2name, key=int))
     elif isinstance(doc, dict) and isinstance(doc.get("annotations"), list):
         rows = _coco_rows(path, doc["annotations"])

@@ -23,7 +23,7 @@ import numpy as np
 
 from gttdata.detectors import Keypoints2D
 from gttdata.detectors.pandas_h5 import read_pandas_frame
-from gttdata.errors import KeypointFormatError
+from gttdata.errors import KeypointFormatError, NoDetectionsError
 
 __all__ = ["SUMMARY", "read_dlc", "write_dlc"]
 
@@ -32,14 +32,33 @@ SUMMARY = "DeepLabCut predictions, one .csv or .h5 per camera (x, y, likelihood 
 _SCORER = "DLC_gtt_export"
 
 
-def _frames_from_index(index: list[str]) -> np.ndarray:
+def _frames_from_index(path: Path, index: list[str], first_line: int) -> np.ndarray:
+    """Frame number of each row: the first cell when every row's is a whole number, else the row order.
+
+    Image paths (``labeled-data/...``) number the rows in order; a number that is not a whole number
+    ``>= 0`` (``-1``, ``2.5``, ``inf``) is one line naming it.
+    """
     try:
-        return np.asarray([int(float(v)) for v in index], dtype=np.int64)
+        values = [float(v) for v in index]
     except ValueError:
         return np.arange(len(index), dtype=np.int64)  # image paths (labeled-data/...): row order
+    for i, v in enumerate(values):
+        if not (np.isfinite(v) and v >= 0 and v.is_integer() and v < 2**62):
+            raise KeypointFormatError(
+                f"{path}: line {first_line + i}: expected a frame number (an integer >= 0) in the first "
+                f"column, found {index[i]!r}"
+            )
+    return np.asarray(values, dtype=np.int64)
 
 
-def _assemble(path: Path, bodyparts: list[str], coords: list[str], data: np.ndarray, index: list[str]):
+def _assemble(
+    path: Path,
+    bodyparts: list[str],
+    coords: list[str],
+    data: np.ndarray,
+    index: list[str],
+    first_line: int = 1,
+):
     parts: list[str] = []
     for b in bodyparts:
         if b not in parts:
@@ -59,7 +78,7 @@ def _assemble(path: Path, bodyparts: list[str], coords: list[str], data: np.ndar
     return Keypoints2D(
         xy=xy,
         score=np.clip(score, 0.0, 1.0),
-        frame=_frames_from_index(index),
+        frame=_frames_from_index(path, index, first_line),
         joint_names=tuple(parts),
         source=str(path),
         fmt="dlc",
@@ -74,7 +93,10 @@ def _first_individual(header: dict[str, list[str]]) -> np.ndarray:
 
 
 def _read_csv(path: Path) -> Keypoints2D:
-    rows = list(csv.reader(io.StringIO(path.read_text())))
+    try:
+        rows = list(csv.reader(io.StringIO(path.read_text())))
+    except (csv.Error, UnicodeDecodeError) as exc:
+        raise KeypointFormatError(f"{path}: not a DeepLabCut CSV file: {exc}") from exc
     header: dict[str, list[str]] = {}
     k = 0
     while k < len(rows) and rows[k] and rows[k][0] in ("scorer", "individuals", "bodyparts", "coords"):
@@ -89,6 +111,8 @@ def _read_csv(path: Path) -> Keypoints2D:
             f"{path}: header 'bodyparts' has {len(header['bodyparts'])} columns, 'coords' has {ncol}"
         )
     body = [r for r in rows[k:] if r]
+    if not body:
+        raise NoDetectionsError(f"{path}: no prediction rows after the header")
     data = np.full((len(body), ncol), np.nan)
     for i, r in enumerate(body):
         if len(r) != ncol + 1:
@@ -104,6 +128,7 @@ def _read_csv(path: Path) -> Keypoints2D:
         [c for c, m in zip(header["coords"], keep, strict=True) if m],
         data[:, keep],
         [r[0] for r in body],
+        k + 1,
     )
 
 

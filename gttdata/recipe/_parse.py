@@ -10,6 +10,7 @@ recipe reads: resolved against the recipe file's folder by :func:`resolve_paths`
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 import types
@@ -22,7 +23,7 @@ import yaml
 
 from gttdata.errors import RecipeError
 from gttdata.recipe.param import Param
-from gttdata.recipe.yamlio import load_yaml
+from gttdata.recipe.yamlio import load_yaml, yaml_error_line
 
 __all__ = [
     "Shorthand",
@@ -82,9 +83,9 @@ class _Ctx:
 
 
 def _check_number(ctx: _Ctx, key: str, v: object, meta: dict, expected: str) -> float:
-    if not _is_number(v):
-        raise ctx.fail(key, expected, v)
-    x = cast(float, v)  # an int or a float, not a bool
+    if not _is_number(v) or not math.isfinite(cast(float, v)):
+        raise ctx.fail(key, f"{expected} (finite)" if _is_number(v) else expected, v)
+    x = cast(float, v)  # a finite int or float, not a bool
     if not _in_range(x, meta) or (meta.get("integer") and float(x) != int(x)):
         raise ctx.fail(key, expected, v)
     return int(x) if meta.get("integer") else float(x)
@@ -121,11 +122,10 @@ def _convert_param(ctx: _Ctx, key: str, v: object, meta: dict) -> Param:
             raise ctx.fail(sub, f"a non-empty list of {num}", args)
         args = [_check_number(ctx, sub, a, meta, f"options that are each {num}") for a in args]
     else:
-        if (
-            not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args))
-            or args[1] < 0
+        if not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args)) or not (
+            0 <= args[1] < math.inf
         ):
-            raise ctx.fail(sub, "[mu, sigma] with sigma >= 0", args)
+            raise ctx.fail(sub, "[mu, sigma] with finite sigma >= 0", args)
         _check_number(ctx, sub, args[0], {**meta, "integer": False}, f"a mean that is {num}")
         args = [float(a) for a in args]
     return Param(kind, tuple(args), **kw)
@@ -165,7 +165,7 @@ def _convert_union(ctx: _Ctx, key: str, members: tuple, v: object) -> object:
     if not isinstance(v, dict):
         raise ctx.fail(key, "a mapping with 'kind' one of " + ", ".join(repr(k) for k in kinds), v)
     kind = v.get("kind", next(iter(kinds)))
-    if kind not in kinds:
+    if not isinstance(kind, str) or kind not in kinds:
         raise ctx.fail(f"{key}.kind", "one of " + ", ".join(repr(k) for k in kinds), kind)
     return build_dataclass(kinds[kind], v, key, ctx)
 
@@ -281,7 +281,8 @@ def read_yaml_mapping(path: str | Path, *, error: type[RecipeError] = RecipeErro
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}: " if mark is not None else ""
-        raise error(f"{source}: {where}not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise error(f"{source}: {where}not valid YAML ({problem})") from exc
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise error(f"{source}: <top>: expected a mapping of recipe sections, found {type(data).__name__}")
@@ -339,7 +340,8 @@ def _resolve_nested(tp: object, v: object, base: Path) -> object:
             kinds = {
                 m.__dataclass_fields__["kind"].default: m for m in members if "kind" in m.__dataclass_fields__
             }
-            chosen = kinds.get(v.get("kind"), members[0]) if kinds else members[0]
+            kind = v.get("kind")
+            chosen = kinds.get(kind, members[0]) if kinds and isinstance(kind, str) else members[0]
             return resolve_paths(chosen, v, base)
         others = [a for a in args if a is not type(None)]
         return _resolve_nested(others[0], v, base) if len(others) == 1 else v
@@ -390,7 +392,9 @@ def apply_overrides(
         try:
             value = load_yaml(text)
         except yaml.YAMLError as exc:
-            raise error(f"{source}: override {key}: value {text!r} is not valid YAML ({exc})") from exc
+            raise error(
+                f"{source}: override {key}: value {text!r} is not valid YAML ({yaml_error_line(exc)})"
+            ) from exc
         node: object = data
         parts = key.strip().split(".")
         for i, part in enumerate(parts):

@@ -39,13 +39,23 @@ def _struct_field(path: Path, struct: np.ndarray, name: str, *, optional: bool =
     return struct[name].flat[0]
 
 
+def _numeric(path: Path, value, name: str) -> np.ndarray:
+    """``value`` as a float64 array; a string, struct or ragged cell is one line naming the field."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ImportFormatError(
+            f"{path}: field '{name}': expected numbers, found {type(value).__name__} ({exc})"
+        ) from exc
+
+
 def _cells(path: Path, value, name: str, n: int | None, shape: tuple[int | None, ...]) -> list[np.ndarray]:
     """A cell array as a list of float arrays of the given shape (None = any size)."""
     if not (isinstance(value, np.ndarray) and value.dtype == object):
         raise ImportFormatError(
             f"{path}: field 'caminput.{name}': expected an N x 1 cell array, found {type(value).__name__}"
         )
-    items = [np.asarray(v, dtype=np.float64) for v in value.ravel()]
+    items = [_numeric(path, v, f"caminput.{name}{{{i + 1}}}") for i, v in enumerate(value.ravel())]
     if n is not None and len(items) != n:
         raise ImportFormatError(
             f"{path}: field 'caminput.{name}': expected {n} cells (one per image), found {len(items)}"
@@ -63,7 +73,7 @@ def _order(path: Path, value, n: int, name: str) -> np.ndarray | None:
     """A 1-based global order (a sequence of image numbers) as the time rank of each image, or None."""
     if value is None:
         return None
-    a = np.asarray(value, dtype=np.float64).ravel()
+    a = _numeric(path, value, name).ravel()
     if a.size == 1 and a[0] == 0:
         return None
     if a.size != n or not np.array_equal(np.sort(a), np.arange(1, n + 1)):
@@ -76,8 +86,14 @@ def _order(path: Path, value, n: int, name: str) -> np.ndarray | None:
 
 
 def _cameras(path: Path, cam_index: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    counts = np.asarray(cam_index, dtype=np.float64).ravel()
-    if counts.size == 0 or np.any(np.diff(np.concatenate([[0.0], counts])) <= 0) or counts[-1] != n:
+    counts = _numeric(path, cam_index, "caminput.cam_index").ravel()
+    if (
+        counts.size == 0
+        or not np.all(np.isfinite(counts))
+        or np.any(counts != np.round(counts))
+        or np.any(np.diff(np.concatenate([[0.0], counts])) <= 0)
+        or counts[-1] != n
+    ):
         raise ImportFormatError(
             f"{path}: field 'caminput.cam_index': expected 1 x V increasing cumulative image counts ending at "
             f"N = {n}, found {counts.tolist()[:8]}"
@@ -132,11 +148,13 @@ def read_dloe_mat(path: str | Path, *, units: str | None = None) -> ImportedCapt
     x = _cells(path, _struct_field(path, ci, "x"), "x", n, (3, p))
     K = np.stack(_cells(path, _struct_field(path, ci, "K"), "K", n, (3, 3)))
     R = np.stack(_cells(path, _struct_field(path, ci, "R"), "R", n, (3, 3)))
-    centres = np.stack([c.ravel() for c in _cells(path, _struct_field(path, ci, "t"), "t", n, (None, None))])
-    if centres.shape != (n, 3):
+    t_cells = _cells(path, _struct_field(path, ci, "t"), "t", n, (None, None))
+    sizes = sorted({c.size for c in t_cells})
+    if sizes != [3]:
         raise ImportFormatError(
-            f"{path}: field 'caminput.t': expected N cells of 1 x 3 centres, found {centres.shape}"
+            f"{path}: field 'caminput.t': expected N cells of 1 x 3 centres, found cells of {sizes} values"
         )
+    centres = np.stack([c.ravel() for c in t_cells])
     cam, stream = _cameras(path, _struct_field(path, ci, "cam_index"), n)
     rank = _order(path, _struct_field(path, ci, "order", optional=True), n, "caminput.order")
     if rank is None and "order" in mat:
@@ -153,7 +171,7 @@ def read_dloe_mat(path: str | Path, *, units: str | None = None) -> ImportedCapt
     image_size = np.round(2.0 * K[first][:, :2, 2]).astype(np.int32)
     X = None
     if "X_GT" in mat:
-        gt = np.asarray(mat["X_GT"], dtype=np.float64)
+        gt = _numeric(path, mat["X_GT"], "X_GT")
         if gt.shape != (3 * p, n):
             raise ImportFormatError(
                 f"{path}: field 'X_GT': expected shape (3P, N) = {(3 * p, n)}, found {gt.shape}"
