@@ -6,14 +6,27 @@ pick one sample of a stored capture (``--sample``/``--split``/``--variant``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import contextlib
+import logging
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import click
 from click.core import ParameterSource
 
-__all__ = ["SPLIT_DEFAULT", "check_shard_split", "sample_options", "version_option"]
+__all__ = [
+    "SPLIT_DEFAULT",
+    "WarningLines",
+    "check_shard_split",
+    "install_warning_lines",
+    "not_a_warning_line",
+    "prints_warnings",
+    "sample_options",
+    "version_option",
+    "warning_lines",
+]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -110,3 +123,65 @@ def check_shard_split(path: str | Path, split: str | None) -> None:
             f"{p}: --split {split!r} contradicts the shard's own split {own!r}; a shard file holds one "
             f"split (drop --split, or pass --split {own})"
         )
+
+
+class WarningLines(logging.Handler):
+    """Echo a library logger's warnings as ``warning: ...`` lines on stderr (docs/CLI.md)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Print the record as one ``warning:`` line (once, however many of these handlers it reaches)."""
+        if getattr(record, "_gtt_warning_line", False):
+            return
+        record._gtt_warning_line = True  # type: ignore[attr-defined]
+        click.echo(f"warning: {record.getMessage()}", err=True)
+
+
+@contextlib.contextmanager
+def warning_lines(*names: str) -> Iterator[None]:
+    """Inside the block, warnings logged under the loggers ``names`` (default: all of gttdata) print as ``warning:`` lines.
+
+    A logger whose warnings already print (:func:`install_warning_lines`) gets no second handler.
+    """
+    handler = WarningLines(logging.WARNING)
+    loggers = [logging.getLogger(n) for n in (names or ("gttdata",))]
+    loggers = [lg for lg in loggers if not prints_warnings(lg)]
+    for lg in loggers:
+        lg.addHandler(handler)
+    try:
+        yield
+    finally:
+        for lg in loggers:
+            lg.removeHandler(handler)
+
+
+def prints_warnings(logger: logging.Logger) -> bool:
+    """Whether ``logger``'s warnings already reach a :class:`WarningLines` handler (its own or an ancestor's)."""
+    lg: logging.Logger | None = logger
+    while lg is not None:
+        if any(isinstance(h, WarningLines) for h in lg.handlers):
+            return True
+        lg = lg.parent if lg.propagate else None
+    return False
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    click.echo(f"warning: {message}", err=True)
+
+
+def install_warning_lines() -> None:
+    """Make every warning a command prints one ``warning: ...`` line on stderr (docs/CLI.md).
+
+    Python warnings (``warnings.warn``) lose their ``file:line: Category:`` prefix and source line, and
+    the gttdata and gttnet loggers' warnings print as ``warning:`` lines (a command that also logs to the
+    root logger, as ``gttnet train`` does, filters them there). Called by both command groups.
+    """
+    warnings.showwarning = _show_warning
+    for name in ("gttdata", "gttnet"):
+        lg = logging.getLogger(name)
+        if not any(isinstance(h, WarningLines) for h in lg.handlers):
+            lg.addHandler(WarningLines(logging.WARNING))
+
+
+def not_a_warning_line(record: logging.LogRecord) -> bool:
+    """Logging filter: False for the gttdata/gttnet warnings :func:`install_warning_lines` already prints."""
+    return not (record.levelno >= logging.WARNING and record.name.split(".")[0] in ("gttdata", "gttnet"))

@@ -37,6 +37,9 @@ if TYPE_CHECKING:  # OpenCV is imported where it is used: 0.05-0.1 s of start-up
 
 __all__ = [
     "CALIBRATION_UNITS",
+    "DISTORTION_NAMES",
+    "MAX_DISTORTION",
+    "check_distortion",
     "check_rig",
     "distort_points",
     "load_calibration",
@@ -123,6 +126,48 @@ def check_rig(rig: CameraRig, *, units: str = "m", source: str = "calibration") 
                 f"{np.round(p, 2).tolist()} m; check the rotation convention (world->camera expected) and units"
             )
     return None
+
+
+#: OpenCV's distortion coefficients in order (``k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]``).
+DISTORTION_NAMES: tuple[str, ...] = (
+    "k1",
+    "k2",
+    "p1",
+    "p2",
+    "k3",
+    "k4",
+    "k5",
+    "k6",
+    "s1",
+    "s2",
+    "s3",
+    "s4",
+    "tx",
+    "ty",
+)
+
+#: Largest accepted magnitude of a distortion coefficient. Real lenses have |k1| of order 0.01-1 and the
+#: rational model's k1..k6 reach tens; 100 and beyond is a unit or column mistake (k1 = 1e6 would fold
+#: the image onto itself), so such a calibration is refused rather than used.
+MAX_DISTORTION = 100.0
+
+
+def check_distortion(rig: CameraRig, source: str | Path) -> None:
+    """Refuse non-finite or absurd lens distortion (beyond :data:`MAX_DISTORTION`).
+
+    Raises:
+        CalibrationError: One line naming ``source``, the camera and the coefficient.
+    """
+    for cam in rig.cameras:
+        dist = np.asarray(cam.dist, dtype=np.float64)
+        bad = np.flatnonzero(~(np.abs(dist) <= MAX_DISTORTION))  # NaN fails the test too
+        if bad.size:
+            i = int(bad[0])
+            name = DISTORTION_NAMES[i] if i < len(DISTORTION_NAMES) else f"#{i}"
+            raise CalibrationError(
+                f"{source}: camera {cam.name!r}: distortion coefficient {name} (position {i}) must be finite "
+                f"with magnitude <= {MAX_DISTORTION:g}, found {dist[i]:g}"
+            )
 
 
 def read_toml_calibration(path: str | Path, *, units: str | None = None) -> tuple[CameraRig, str]:
@@ -344,6 +389,7 @@ def load_calibration(
             f"{path}: unknown calibration layout; expected .toml (aniposelib/Pose2Sim/FreeMoCap/Caliscope), "
             ".qca.txt (Qualisys), .xcp (Vicon) or intri.yml/extri.yml (EasyMocap)"
         )
+    check_distortion(rig, path)
     if warn:
         msg = check_rig(rig, units=used, source=str(path))
         if msg:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from gttdata.calibration import load_calibration, undistort_points
-from gttdata.cameras import CameraRig
+from gttdata.cameras import Camera, CameraRig
 from gttdata.capture.views import SEQUENCING, Observations
 from gttdata.detectors import Keypoints2D, candidate_sets, read_keypoints
 from gttdata.errors import CalibrationError, KeypointFormatError, NoDetectionsError
@@ -279,7 +279,7 @@ class RecordingView:
     source: str = ""
 
 
-def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> Skeleton:
+def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str, source: str = "") -> Skeleton:
     """The keypoints' topology of a recording.
 
     The keypoints' topology: a project's skeleton table or name, else the recognised keypoint set
@@ -307,18 +307,18 @@ def _skeleton(names: tuple[str, ...], wanted: str | dict | None, kset: str) -> S
             from gttdata.skeletons_detectors import POSE2SIM_MODELS, pose2sim_model
 
             if str(name).strip().upper().replace("-", "_") not in POSE2SIM_MODELS:
-                raise KeypointFormatError(f"skeleton: {exc.args[0]}") from None
+                raise KeypointFormatError(f"{source}: skeleton: {exc.args[0]}") from None
             sk = get_skeleton(pose2sim_model(name))  # Pose2Sim's model names: COCO, Body_with_feet...
     if sk.n_joints != len(names):
         raise KeypointFormatError(
-            f"skeleton {sk.name!r} has {sk.n_joints} joints but the keypoint sources have {len(names)}"
+            f"{source}: skeleton {sk.name!r} has {sk.n_joints} joints but the keypoint sources have {len(names)}"
         )
     return sk
 
 
 def _recording_skeleton(names: tuple[str, ...], wanted: str | dict | None, first: Keypoints2D) -> Skeleton:
     """:func:`_skeleton`, with a DeepLabCut file's limbs read from its project's ``config.yaml`` when found."""
-    sk = _skeleton(names, wanted, first.keypoint_set)
+    sk = _skeleton(names, wanted, first.keypoint_set, first.source)
     if wanted is None and first.fmt == "dlc" and sk.name.startswith("detector"):
         from gttdata.skeletons_detectors import dlc_project_edges, skeleton_from_edges
 
@@ -346,6 +346,29 @@ def _by_number(cam: CameraInput, by_name: dict) -> CameraInput:
         return cam
     log.info("camera %r matched to calibration camera %r by its number", cam.name, same[0])
     return dataclasses.replace(cam, name=same[0])
+
+
+def _outside_image(kp: Keypoints2D, camera: Camera) -> Keypoints2D:
+    """``kp`` with keypoints more than one image size outside ``camera``'s image made missing, with a warning.
+
+    A detection lies in the image, give or take a lens's distortion; one beyond ``[-W, 2W] x [-H, 2H]``
+    (-5000 px, 1e300 px) is a unit or column mistake, and one such point pulls a triangulation metres off.
+    """
+    w, h = camera.image_size
+    x, y = kp.xy[..., 0], kp.xy[..., 1]
+    with np.errstate(invalid="ignore"):
+        far = (x < -w) | (x > 2 * w) | (y < -h) | (y > 2 * h)
+    if not far.any():
+        return kp
+    r, j = (int(v[0]) for v in np.nonzero(far))
+    log.warning(
+        "%s: camera %r: %d keypoint(s) lie more than one image size outside its %dx%d image (first: frame %d "
+        "joint %r at (%.4g, %.4g) px); treated as missing",
+        kp.source, camera.name, int(far.sum()), w, h, int(kp.frame[r]), kp.joint_names[j], x[r, j], y[r, j],
+    )  # fmt: skip
+    return dataclasses.replace(
+        kp, xy=np.where(far[..., None], np.nan, kp.xy), score=np.where(far, np.nan, kp.score)
+    )
 
 
 @dataclass(frozen=True)
@@ -413,6 +436,7 @@ class Recording:
                 empty.append(str(exc))
                 log.warning("%s; camera %r left out", exc, c.name)
                 continue
+            kp = _outside_image(kp, by_name[c.name])
             if joint_names is None:
                 joint_names, first = kp.joint_names, kp
             elif kp.joint_names != joint_names:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import click
 
-from gttdata._cli_common import version_option
+from gttdata._cli_common import install_warning_lines, version_option
 from gttdata.errors import friendly_errors
 
 __all__ = ["main", "friendly_errors"]
@@ -29,6 +29,7 @@ __all__ = ["main", "friendly_errors"]
 @version_option("gttdata", ("gtt", "numpy", "scipy", "h5py", "opencv-python-headless", "click", "pyyaml"))
 def main() -> None:
     """Simulate unsynchronized multi-camera captures from mocap and write them as HDF5 shards."""
+    install_warning_lines()
 
 
 # Each subcommand module adds itself to ``main`` (imported after ``main`` exists; a missing one fails loudly).

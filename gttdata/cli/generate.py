@@ -32,7 +32,7 @@ def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> 
     try:
         from gttdata.preview.render import render_samples
     except ImportError as exc:
-        click.echo(f"--preview: skipped, the preview renderer is not available ({exc})", err=True)
+        click.echo(f"warning: --preview: skipped, the preview renderer is not available ({exc})", err=True)
         return []
     split = next(iter(manifest.splits))
     reader = DatasetReader(root, split, manifest=manifest)
@@ -42,7 +42,8 @@ def _preview(manifest: Manifest, root: Path, n: int, *, quiet: bool = False) -> 
         inspect.signature(render_samples).bind(samples, out)
     except TypeError:
         click.echo(
-            f"--preview: skipped, render_samples{inspect.signature(render_samples)} does not take (samples, out_dir)",
+            f"warning: --preview: skipped, render_samples{inspect.signature(render_samples)} does not take "
+            "(samples, out_dir)",
             err=True,
         )
         return []

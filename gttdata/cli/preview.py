@@ -23,7 +23,7 @@ def _check_3d() -> bool:
     try:
         offscreen_renderer(8, 8)
     except (RendererUnavailableError, PreviewDependencyError) as exc:
-        click.echo(f"3-D views skipped: {exc}", err=True)
+        click.echo(f"warning: 3-D views skipped: {exc}", err=True)
         return False
     return True
 
@@ -122,7 +122,7 @@ def preview_cmd(
                 reader, out, sample=indices[0], max_samples=max_samples, progress=progress
             )
         except PreviewDependencyError as exc:
-            click.echo(f"plots skipped: {exc}", err=True)
+            click.echo(f"warning: plots skipped: {exc}", err=True)
     if not quiet:
         for path in written:
             click.echo(str(path))

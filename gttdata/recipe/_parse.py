@@ -83,8 +83,10 @@ class _Ctx:
 
 
 def _check_number(ctx: _Ctx, key: str, v: object, meta: dict, expected: str) -> float:
-    if not _is_number(v) or not math.isfinite(cast(float, v)):
-        raise ctx.fail(key, f"{expected} (finite)" if _is_number(v) else expected, v)
+    if not _is_number(v):
+        raise ctx.fail(key, expected, v)
+    if not math.isfinite(cast(float, v)):
+        raise ctx.at(key, f"expected {expected}, found {v!r} (numbers must be finite)")
     x = cast(float, v)  # a finite int or float, not a bool
     if not _in_range(x, meta) or (meta.get("integer") and float(x) != int(x)):
         raise ctx.fail(key, expected, v)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import click
 
-from gttdata._cli_common import version_option
+from gttdata._cli_common import install_warning_lines, version_option
 
 __all__ = ["main"]
 
@@ -28,6 +28,7 @@ __all__ = ["main"]
 @version_option("gttnet", ("gtt", "torch", "numpy", "scipy"))
 def main() -> None:
     """Reconstruct dynamic 3D skeletons from unsynchronized multi-camera 2-D observations."""
+    install_warning_lines()
 
 
 # Each subcommand module adds itself to ``main`` (imported after ``main`` exists; a missing one fails loudly).

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from gttdata._cli_common import check_shard_split, sample_options
+from gttdata._cli_common import WarningLines, check_shard_split, sample_options
 from gttdata.errors import RigError, friendly_errors
 from gttdata.threads import threads_option
 from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_HELP
@@ -131,11 +131,7 @@ def _method_default() -> str:
     return "auto" if "auto" in BUILTIN_METHODS else "dloe"
 
 
-class _WarningLines(logging.Handler):
-    """Echo a library logger's warnings as ``warning: ...`` lines on stderr (docs/CLI.md)."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        click.echo(f"warning: {record.getMessage()}", err=True)
+_WarningLines = WarningLines  # the name gttnet render and sync import
 
 
 class _Held(logging.Handler):

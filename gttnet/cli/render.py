@@ -139,10 +139,12 @@ def render_cmd(
         raise click.ClickException(f"{out}: exists and is not empty; pass --overwrite to write into it")
     import logging
 
+    from gttdata._cli_common import prints_warnings
     from gttnet.cli.reconstruct import _WarningLines
 
     warn = _WarningLines(logging.WARNING)
-    loggers = [logging.getLogger(n) for n in ("gttdata.calibration", "gttnet.apps.render", "gttnet.io")]
+    names = ("gttdata", "gttnet.apps.render", "gttnet.io")
+    loggers = [lg for lg in map(logging.getLogger, names) if not prints_warnings(lg)]  # none printed twice
     for lg in loggers:
         lg.addHandler(warn)
     try:

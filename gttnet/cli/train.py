@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from gttdata._cli_common import not_a_warning_line
 from gttdata.errors import friendly_errors
 from gttdata.threads import threads_option
 
@@ -68,6 +69,8 @@ def train_command(
             level=logging.WARNING if quiet or as_json else logging.INFO,
             format="%(levelname)s %(name)s: %(message)s",
         )
+        for handler in logging.getLogger().handlers:  # gttdata/gttnet warnings print as warning: lines
+            handler.addFilter(not_a_warning_line)
     recipe, out = _old_resume_form(recipe, overrides, resume, out)
     if recipe is None and not resume:
         raise click.UsageError("give a RECIPE (e.g. recipes/gttnet/tiny.yaml), or --out RUN --resume")

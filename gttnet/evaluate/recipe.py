@@ -47,7 +47,7 @@ class DataSpec:
     generate: str | None = field(default=None, metadata={"path": True})
     dataset: str | None = field(default=None, metadata={"path": True})
     split: str = "test"
-    n_sequences: int | None = None
+    n_sequences: int | None = field(default=None, metadata={"ge": 1})
     overrides: list[str] = field(default_factory=list)
     variant: str = "orig"
 
@@ -136,8 +136,8 @@ class RuntimeSpec:
     methods: list[str] = field(default_factory=lambda: ["dloe", "gttnet"])
     generate: str = field(default="recipes/gttdata/paper.yaml", metadata={"path": True})
     split: str = "test"
-    repeats: int = 1
-    sequences: int = 1
+    repeats: int = field(default=1, metadata={"ge": 1})
+    sequences: int = field(default=1, metadata={"ge": 1})
     sequencing: str = "none"
     model: str | None = field(default=None, metadata={"path": True})
     device: str = "cpu"
@@ -168,10 +168,10 @@ class EvalRecipe:
     sweeps: list[SweepSpec] = field(default_factory=list)
     sequencing: list[str] = field(default_factory=lambda: list(SEQUENCING))
     methods: list[MethodEntry] = field(default_factory=list)
-    workers: int = 1
+    workers: int = field(default=1, metadata={"ge": 1, "le": 1024})
     error_bars: str = "ci95"
     plot_statistic: str = "mean"
-    seed: int | None = None
+    seed: int | None = field(default=None, metadata={"ge": 0, "lt": 2**32})
     runtime: RuntimeSpec | None = None
 
     #: The error type :func:`gttdata.recipe.load_recipe` raises for this recipe.

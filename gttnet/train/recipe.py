@@ -29,6 +29,12 @@ __all__ = [
 ]
 
 
+#: Ranges of the loop settings (refused with one line beyond them, like every recipe range): larger values
+#: are typos that would exhaust memory or processes.
+MAX_BATCH_SIZE = 4096
+MAX_WORKERS = 256
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """Which network to build.
@@ -68,8 +74,8 @@ class SourceSpec:
     kind: str = "recipe"
     root: str | None = None
     manifest: str | None = field(default=None, metadata={"path": True})
-    max_train: int | None = None
-    max_val: int | None = 4
+    max_train: int | None = field(default=None, metadata={"ge": 1})
+    max_val: int | None = field(default=4, metadata={"ge": 0})
 
     def __post_init__(self) -> None:
         if self.kind not in ("recipe", "shards"):
@@ -106,7 +112,7 @@ class DataSpec:
     val_split: str = "val"
     sequencing: dict[str, float] = field(default_factory=lambda: {"none": 1.0, "partial": 1.0, "full": 1.0})
     variants: list[str] = field(default_factory=lambda: ["orig"])
-    num_workers: int = 0
+    num_workers: int = field(default=0, metadata={"ge": 0, "le": MAX_WORKERS})
     cache: str = "disk"
     stream_order: bool = False
 
@@ -114,6 +120,10 @@ class DataSpec:
 @dataclass(frozen=True)
 class TrainSpec:
     """Loop settings shared by every stage.
+
+    Ranges (refused with one line outside them): ``batch_size`` 1..:data:`MAX_BATCH_SIZE`,
+    ``grad_clip`` > 0 or null, ``log_every``, ``checkpoint_every`` and ``steps_per_epoch`` >= 1,
+    ``threads`` >= 1 or null; every number finite.
 
     Args:
         batch_size: Sequences per optimiser step; each is run twice (as captured and rotated).
@@ -130,15 +140,15 @@ class TrainSpec:
             :func:`gttnet.train.threads.limit_cpu_threads`); raise it on an idle many-core one.
     """
 
-    batch_size: int = 2
-    rotation: str = "so3"
+    batch_size: int = field(default=2, metadata={"ge": 1, "le": MAX_BATCH_SIZE})
+    rotation: str = field(default="so3", metadata={"choices": ("so3", "yaw", "none")})
     device: str = "auto"
     amp: bool = False
     dtype: str = "float32"
-    grad_clip: float | None = 1.0
-    log_every: int = 10
-    checkpoint_every: int = 200
-    steps_per_epoch: int | None = None
+    grad_clip: float | None = field(default=1.0, metadata={"gt": 0})
+    log_every: int = field(default=10, metadata={"ge": 1})
+    checkpoint_every: int = field(default=200, metadata={"ge": 1})
+    steps_per_epoch: int | None = field(default=None, metadata={"ge": 1})
     threads: int | None = 1
 
 
@@ -161,7 +171,7 @@ class TrainRecipe:
 
     name: str
     stages: list[Stage]
-    seed: int = 0
+    seed: int = field(default=0, metadata={"ge": 0, "lt": 2**32})
     output_dir: str | None = None
     model: ModelSpec = field(default_factory=ModelSpec)
     data: DataSpec = field(default_factory=DataSpec)

@@ -34,6 +34,9 @@ SCHEDULES: tuple[str, ...] = ("plateau", "constant", "cosine")
 class Stage:
     """One stage of the cascade; the loop runs stages in order with a fresh optimiser each.
 
+    Ranges (refused with one line outside them): ``steps`` 1..10^9, ``epochs`` 1..10^6, ``lr`` in
+    (0, 10], ``plateau_factor`` in (0, 1], ``plateau_patience`` and ``min_lr`` >= 0; loss weights finite.
+
     Args:
         name: Stage name (logs, checkpoints).
         losses: Weight of each loss in :data:`LOSS_NAMES`; losses not named are not computed.
@@ -52,13 +55,13 @@ class Stage:
 
     name: str
     losses: dict[str, float]
-    steps: int | None = None
-    epochs: int | None = None
-    lr: float = 1e-3
+    steps: int | None = field(default=None, metadata={"ge": 1, "le": 10**9})
+    epochs: int | None = field(default=None, metadata={"ge": 1, "le": 10**6})
+    lr: float = field(default=1e-3, metadata={"gt": 0, "le": 10})
     schedule: str = "plateau"
-    plateau_factor: float = 0.5
-    plateau_patience: int = 2
-    min_lr: float = 1e-6
+    plateau_factor: float = field(default=0.5, metadata={"gt": 0, "le": 1})
+    plateau_patience: int = field(default=2, metadata={"ge": 0})
+    min_lr: float = field(default=1e-6, metadata={"ge": 0})
     frozen: list[str] = field(default_factory=list)
     affinity_target: str = "continuous"
     norm: str = "mse"
