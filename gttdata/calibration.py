@@ -146,6 +146,9 @@ DISTORTION_NAMES: tuple[str, ...] = (
     "ty",
 )
 
+#: Numbers of distortion coefficients OpenCV's model takes (0: no distortion).
+DISTORTION_COUNTS: tuple[int, ...] = (0, 4, 5, 8, 12, 14)
+
 #: Largest accepted magnitude of a distortion coefficient. Real lenses have |k1| of order 0.01-1 and the
 #: rational model's k1..k6 reach tens; 100 and beyond is a unit or column mistake (k1 = 1e6 would fold
 #: the image onto itself), so such a calibration is refused rather than used.
@@ -153,13 +156,18 @@ MAX_DISTORTION = 100.0
 
 
 def check_distortion(rig: CameraRig, source: str | Path) -> None:
-    """Refuse non-finite or absurd lens distortion (beyond :data:`MAX_DISTORTION`).
+    """Refuse non-finite or absurd lens distortion (beyond :data:`MAX_DISTORTION`) or a count OpenCV cannot use.
 
     Raises:
         CalibrationError: One line naming ``source``, the camera and the coefficient.
     """
     for cam in rig.cameras:
         dist = np.asarray(cam.dist, dtype=np.float64)
+        if dist.size not in DISTORTION_COUNTS:
+            raise CalibrationError(
+                f"{source}: camera {cam.name!r}: expected 0, 4, 5, 8, 12 or 14 distortion coefficients "
+                f"(OpenCV's model), found {dist.size}"
+            )
         bad = np.flatnonzero(~(np.abs(dist) <= MAX_DISTORTION))  # NaN fails the test too
         if bad.size:
             i = int(bad[0])

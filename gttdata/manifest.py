@@ -430,7 +430,12 @@ def load_manifest(path: str | Path) -> Manifest:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ManifestError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from exc
-    return Manifest.from_dict(data, source=str(path))
+    if not isinstance(data, dict):
+        raise ManifestError(f"{path}: expected a JSON object, found {type(data).__name__}")
+    try:
+        return Manifest.from_dict(data, source=str(path))
+    except (TypeError, AttributeError, ValueError, KeyError) as exc:  # a field of the wrong type
+        raise ManifestError(f"{path}: a manifest field has the wrong type ({exc})") from exc
 
 
 def verify_manifest(root: str | Path, manifest: Manifest | None = None, *, deep: bool = False) -> list[str]:
