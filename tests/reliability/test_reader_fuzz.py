@@ -424,3 +424,57 @@ def test_many_mutations_of_every_reader(recording, gttnet_json, tmp_path):
         run()
     for kind in ("gttdata/tiny.yaml", "gttnet/tiny.yaml", "gttnet/eval_smoke.yaml"):
         _recipe_runner(kind, MANY)()
+
+
+# --- SLEAP (sleap-io faked: the optional package is not installed here) -------------------------------
+
+
+class _FakeInstance:
+    def __init__(self, points, scored):
+        self.points, self.scored = points, scored
+        if scored:
+            self.score = 1.0
+
+    def numpy(self, scores=False):
+        return self.points
+
+
+class _FakeFrame:
+    def __init__(self, video, frame_idx, instances):
+        self.video, self.frame_idx, self.instances = video, frame_idx, instances
+
+
+class _FakeLabels:
+    def __init__(self, names, frames, video):
+        self.skeletons = [type("S", (), {"node_names": names})()]
+        self.videos = [video]
+        self.labeled_frames = frames
+
+
+def test_sleap_reader_with_odd_contents(tmp_path, monkeypatch):
+    """Odd point arrays, frame indices and skeletons from sleap-io give a result or one line."""
+    import sys
+    import types
+
+    from hypothesis import strategies as st
+
+    from gttdata.detectors.sleap import read_sleap
+
+    path = tmp_path / "cam.slp"
+    path.write_bytes(b"")
+    points = st.sampled_from(
+        [np.ones((3, 3)), np.ones((3, 2)), np.ones((4, 3)), np.full((3, 3), np.inf), np.full((3, 3), np.nan),
+         np.ones((3,)), np.ones((0, 3)), np.array([["a", "b", "c"]] * 3)]
+    )  # fmt: skip
+    frame_idx = st.sampled_from([0, 1, -1, 2**70, 1.5, "x", None])
+
+    @FAST
+    @given(pts=st.lists(st.tuples(points, frame_idx, st.booleans()), max_size=4))
+    def run(pts):
+        video = types.SimpleNamespace(filename="cam.mp4")
+        frames = [_FakeFrame(video, f, [_FakeInstance(p, s)]) for p, f, s in pts]
+        fake = types.SimpleNamespace(load_slp=lambda _: _FakeLabels(("a", "b", "c"), frames, video))
+        monkeypatch.setitem(sys.modules, "sleap_io", fake)
+        project_error_or_result(lambda: read_sleap(path))
+
+    run()
