@@ -238,11 +238,34 @@ def _fs_mat(fs: cv2.FileStorage, key: str, path: Path, required: bool = True) ->
         if required:
             raise CalibrationError(f"{path}: field {key!r} is missing")
         return None
-    m = node.mat()
-    if m is None:
-        v = node.real()
-        return np.asarray([v], dtype=np.float64)
-    return np.asarray(m, dtype=np.float64)
+    if node.isSeq():
+        return np.asarray([node.at(i).real() for i in range(node.size())], dtype=np.float64)
+    if node.isInt() or node.isReal():
+        return np.asarray([node.real()], dtype=np.float64)
+    if not _fs_matrix_ok(node):  # OpenCV aborts the process on a malformed !!opencv-matrix
+        raise CalibrationError(
+            f"{path}: field {key!r}: expected a number, a list or an !!opencv-matrix with rows, cols, dt "
+            "and rows x cols data values"
+        )
+    return np.asarray(node.mat(), dtype=np.float64)
+
+
+def _fs_matrix_ok(node: cv2.FileNode) -> bool:
+    """Whether ``node`` is an ``!!opencv-matrix`` OpenCV can read (a malformed one aborts the process)."""
+    if not node.isMap():
+        return False
+    rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
+    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+        return False
+    r, c = int(rows.real()), int(cols.real())
+    numbers = all(data.at(i).isInt() or data.at(i).isReal() for i in range(data.size()))
+    return (
+        0 <= r < 10**6
+        and 0 <= c < 10**6
+        and data.size() == r * c
+        and dt.string() in tuple("ucwsifd")
+        and numbers
+    )
 
 
 def _cv_message(exc: BaseException) -> str:

@@ -255,3 +255,24 @@ def test_evaluation_recipe_ranges():
     ):
         with pytest.raises(RecipeError, match=rf"eval_smoke.yaml: {key}: expected"):
             load_eval_recipe("recipes/gttnet/eval_smoke.yaml", [override])
+
+
+def test_malformed_opencv_matrix_is_one_line_not_an_abort(tmp_path, sample):
+    """An EasyMocap intri.yml whose !!opencv-matrix lacks 'cols' aborted the process inside OpenCV (SIGABRT)."""
+    from tests.reliability.conftest import cli
+    from tests.reliability.test_reader_fuzz import _easymocap
+
+    proj = export_capture(sample, tmp_path / "op", fmt="openpose")
+    _easymocap(tmp_path / "easymocap")
+    intri = tmp_path / "easymocap" / "intri.yml"
+    text = intri.read_text()
+    head, sep, tail = text.partition("K_cam_1: !!opencv-matrix\n")
+    intri.write_text(head + sep + tail.replace("   cols: 3\n", "", 1))
+    (proj.parent / "project.toml").write_text(
+        (proj.parent / "project.toml")
+        .read_text()
+        .replace('calibration = "calibration.toml"', 'calibration = "../easymocap"')
+    )
+    res = cli("gttnet", "reconstruct", str(proj), "--method", "pseudo", timeout=300)
+    line = one_line_error(res)
+    assert "intri.yml" in line and "K_cam_1" in line
