@@ -106,7 +106,9 @@ def test_recipe_errors_are_one_line(tmp_path):
     base = _recipe(tmp_path)
     with pytest.raises(RecipeError, match=r"^trian: unknown key"):
         parse_train_recipe(base, ["trian.batch_size=2"])
-    with pytest.raises(RecipeError, match=r"train.batch_size: expected an integer >= 1 and <= 4096, found 'two'"):
+    with pytest.raises(
+        RecipeError, match=r"train.batch_size: expected an integer >= 1 and <= 4096, found 'two'"
+    ):
         parse_train_recipe(base, ["train.batch_size=two"])
     with pytest.raises(RecipeError, match="unknown loss 'chamfer'"):
         parse_train_recipe(base, ["stages.0.losses.chamfer=1"])
