@@ -1,7 +1,7 @@
 """The audit replay (``tests/reliability/audit_replay.py``): malformed inputs through the command lines.
 
 Every case must end in a result or ONE error line: no traceback, no crash, no multi-line failure. The
-default run replays every 6th case (about 60, a few seconds); ``-m slow`` replays all of them (about 370).
+default run replays every 3rd case (about 120, a few seconds); ``-m slow`` replays all of them (about 370).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def test_the_replay_covers_every_command(fixtures):
 
 
 def test_audit_replay_fast_subset(fixtures, tmp_path):
-    cases = audit_replay.build_cases(fixtures)[::6]
+    cases = audit_replay.build_cases(fixtures)[::3]
     _check(audit_replay.replay(cases, tmp_path))
 
 
