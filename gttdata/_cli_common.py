@@ -129,9 +129,16 @@ class WarningLines(logging.Handler):
     """Echo a library logger's warnings as ``warning: ...`` lines on stderr (docs/CLI.md)."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        """Print the record as one ``warning:`` line (once, however many of these handlers it reaches)."""
+        """Print the record as one ``warning:`` line: once, however many of these handlers it reaches, and
+        not when its logger was silenced with a ``NullHandler`` (gttnet.sync: its commands print those
+        warnings themselves, by camera name)."""
         if getattr(record, "_gtt_warning_line", False):
             return
+        lg: logging.Logger | None = logging.getLogger(record.name)
+        while lg is not None and not any(h is self for h in lg.handlers):
+            if any(isinstance(h, logging.NullHandler) for h in lg.handlers):
+                return
+            lg = lg.parent if lg.propagate else None
         record._gtt_warning_line = True  # type: ignore[attr-defined]
         click.echo(f"warning: {record.getMessage()}", err=True)
 
