@@ -156,7 +156,10 @@ MAX_DISTORTION = 100.0
 
 
 def check_distortion(rig: CameraRig, source: str | Path) -> None:
-    """Refuse non-finite or absurd lens distortion (beyond :data:`MAX_DISTORTION`) or a count OpenCV cannot use.
+    """Refuse absurd lens distortion (beyond :data:`MAX_DISTORTION`) or a count OpenCV cannot use.
+
+    A non-finite coefficient is left to :meth:`gttdata.recording.Recording.view`, which leaves that camera
+    out with a warning (no detection of it can be undistorted).
 
     Raises:
         CalibrationError: One line naming ``source``, the camera and the coefficient.
@@ -168,13 +171,13 @@ def check_distortion(rig: CameraRig, source: str | Path) -> None:
                 f"{source}: camera {cam.name!r}: expected 0, 4, 5, 8, 12 or 14 distortion coefficients "
                 f"(OpenCV's model), found {dist.size}"
             )
-        bad = np.flatnonzero(~(np.abs(dist) <= MAX_DISTORTION))  # NaN fails the test too
+        bad = np.flatnonzero(np.isfinite(dist) & (np.abs(dist) > MAX_DISTORTION))
         if bad.size:
             i = int(bad[0])
             name = DISTORTION_NAMES[i] if i < len(DISTORTION_NAMES) else f"#{i}"
             raise CalibrationError(
-                f"{source}: camera {cam.name!r}: distortion coefficient {name} (position {i}) must be finite "
-                f"with magnitude <= {MAX_DISTORTION:g}, found {dist[i]:g}"
+                f"{source}: camera {cam.name!r}: distortion coefficient {name} (position {i}) must have "
+                f"magnitude <= {MAX_DISTORTION:g}, found {dist[i]:g}"
             )
 
 

