@@ -129,9 +129,11 @@ class WarningLines(logging.Handler):
     """Echo a library logger's warnings as ``warning: ...`` lines on stderr (docs/CLI.md)."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        """Print the record as one ``warning:`` line: once, however many of these handlers it reaches, and
-        not when its logger was silenced with a ``NullHandler`` (gttnet.sync: its commands print those
-        warnings themselves, by camera name)."""
+        """Print the record as one ``warning:`` line, once however many of these handlers it reaches.
+
+        A logger silenced with a ``NullHandler`` stays silent (gttnet.sync: its commands print those
+        warnings themselves, by camera name).
+        """
         if getattr(record, "_gtt_warning_line", False):
             return
         lg: logging.Logger | None = logging.getLogger(record.name)
@@ -139,7 +141,7 @@ class WarningLines(logging.Handler):
             if any(isinstance(h, logging.NullHandler) for h in lg.handlers):
                 return
             lg = lg.parent if lg.propagate else None
-        record._gtt_warning_line = True  # type: ignore[attr-defined]
+        record._gtt_warning_line = True
         click.echo(f"warning: {record.getMessage()}", err=True)
 
 
