@@ -191,11 +191,85 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def load_view(spec, sequencing: str | None, *, min_confidence=None, weights: bool = True, seed: int = 0):
-    """``(recording, view, ground truth or None)`` of a spec; the calibration's warnings are logged."""
+def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
+    """The recording once per subject, each camera's detections those of that person.
+
+    Where an OpenPose camera folder holds several people in a frame, people are associated across the
+    unsynchronized cameras and through time (:func:`gttnet.association.associate`): the subjects are the
+    people most cameras agree on, so a bystander seen by one camera for a few frames never takes over.
+    Cameras whose sources hold one person per frame keep it as a candidate. A recording with one person
+    per frame everywhere is returned as it is (``n_subjects`` must then be 1).
+
+    Args:
+        recording: The loaded :class:`gttdata.recording.Recording`.
+        spec: Its spec (the keypoint sources to re-read with every person).
+        n_subjects: How many people to return, most supported first (stable ids 0, 1, ...).
+
+    Returns:
+        Up to ``n_subjects`` recordings.
+
+    Raises:
+        ValueError: Fewer people than ``n_subjects`` are seen by two or more cameras.
+    """
+    from gttdata.detectors.openpose import read_openpose_people
+    from gttnet.association import CameraPeople, associate
+
+    crowds = []
+    for cam, kp in zip(spec.cameras, recording.keypoints, strict=True):
+        people = read_openpose_people(cam.keypoints) if kp.fmt == "openpose" else None
+        crowds.append(people)
+    if all(c is None for c in crowds):
+        if n_subjects > 1:
+            raise ValueError(
+                f"{spec.calibration}: --subjects {n_subjects}: every camera's keypoints hold one person per frame"
+            )
+        return [recording]
+    tables = []
+    for kp, people in zip(recording.keypoints, crowds, strict=True):
+        frame, xy, score = people if people is not None else (kp.frame, kp.xy, kp.score)
+        tables.append(CameraPeople(frame, xy, np.nan_to_num(score, nan=0.0)))
+    fps = [float(f) if np.isfinite(f) else 30.0 for f in recording.fps]
+    subjects = associate(tables, list(recording.rig.cameras), fps, n_subjects=n_subjects)
+    if len(subjects) < n_subjects:
+        raise ValueError(
+            f"{spec.calibration}: --subjects {n_subjects}: found {len(subjects)} people seen by two or more cameras"
+        )
+    log.info(
+        "people across cameras: %s",
+        "; ".join(
+            f"subject {k}: {s.support} detections in {s.n_cameras} cameras" for k, s in enumerate(subjects)
+        ),
+    )
+    out = []
+    for s in subjects:
+        kps, times = [], []
+        for v, (kp, t, rows) in enumerate(zip(recording.keypoints, tables, s.detections, strict=True)):
+            score = np.where(t.score[rows] > 0, t.score[rows], np.nan)
+            kps.append(dataclasses.replace(kp, xy=t.keypoints_px[rows], score=score, frame=t.frame[rows]))
+            st = recording.stream_time_s[v]  # a row's time follows its frame number
+            times.append(None if st is None else st[np.searchsorted(kp.frame, t.frame[rows])])
+        out.append(dataclasses.replace(recording, keypoints=tuple(kps), stream_time_s=tuple(times)))
+    return out
+
+
+def load_view(
+    spec,
+    sequencing: str | None,
+    *,
+    min_confidence=None,
+    weights: bool = True,
+    seed: int = 0,
+    subject: int = 0,
+    n_subjects: int = 1,
+):
+    """``(recording, view, ground truth or None)`` of a spec; the calibration's warnings are logged.
+
+    With several people in the keypoint files, the view is that of subject ``subject`` of the
+    ``n_subjects`` best supported (:func:`choose_subjects`).
+    """
     from gttdata.recording import Recording, ground_truth_for
 
-    rec = Recording.load(spec)
+    rec = choose_subjects(Recording.load(spec), spec, n_subjects)[subject]
     view = rec.view(sequencing, min_confidence=min_confidence, weights=weights, seed=seed)
     gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
     return rec, view, gt

@@ -24,7 +24,14 @@ import numpy as np
 from gttdata.detectors import Keypoints2D, keypoint_set_for, read_json
 from gttdata.errors import KeypointFormatError, NoDetectionsError
 
-__all__ = ["SUMMARY", "frame_files", "frame_number", "read_openpose", "write_openpose"]
+__all__ = [
+    "SUMMARY",
+    "frame_files",
+    "frame_number",
+    "read_openpose",
+    "read_openpose_people",
+    "write_openpose",
+]
 
 log = logging.getLogger(__name__)
 
@@ -94,11 +101,11 @@ def frame_files(folder: Path, files: list[Path]) -> list[tuple[int, Path]]:
     return out
 
 
-def _person(path: Path, doc: object) -> np.ndarray | None:
-    """The kept person's flat keypoint array, or None when the frame has nobody."""
+def _people(path: Path, doc: object) -> list[np.ndarray]:
+    """Every person's flat keypoint array in a frame file (``{}`` persons are nobody)."""
     if not isinstance(doc, dict) or not isinstance(doc.get("people"), list):
         raise KeypointFormatError(f"{path}: field 'people' must be a list, found {type(doc).__name__}")
-    best, best_score = None, -np.inf
+    out = []
     for i, person in enumerate(doc["people"]):
         flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
         if isinstance(person, dict) and not flat:  # Pose2Sim's pose-associated files: {} for nobody
@@ -112,10 +119,53 @@ def _person(path: Path, doc: object) -> np.ndarray | None:
             raise KeypointFormatError(
                 f"{path}: field 'people[{i}].pose_keypoints_2d' must be a flat list of 3*J numbers, found {found}"
             )
+        out.append(arr)
+    return out
+
+
+def _person(path: Path, doc: object) -> np.ndarray | None:
+    """The kept person's flat keypoint array (highest summed confidence), or None when the frame has nobody."""
+    best, best_score = None, -np.inf
+    for arr in _people(path, doc):
         score = float(np.nansum(arr[2::3]))
         if best is None or score > best_score:
             best, best_score = arr, score
     return best
+
+
+def read_openpose_people(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Every person of every frame of an OpenPose camera folder, or None when no frame has two people.
+
+    The same frame files as :func:`read_openpose` (stray and duplicate files skipped).
+
+    Returns:
+        ``(frame (M,) int64, xy (M, J, 2) pixels NaN where not found, score (M, J) NaN where not found)``,
+        one row per person, frames in order; None when every frame holds at most one person.
+
+    Raises:
+        KeypointFormatError: As :func:`read_openpose`, or joint counts that differ between people.
+    """
+    folder = Path(folder)
+    frames = frame_files(folder, sorted(folder.glob("*.json")))
+    rows: list[tuple[int, np.ndarray]] = []
+    crowded = False
+    for n, path in frames:
+        people = _people(path, read_json(path))
+        crowded |= len(people) > 1
+        rows += [(n, a) for a in people]
+    if not crowded:
+        return None
+    sizes = {a.size for _, a in rows}
+    if len(sizes) != 1:
+        raise KeypointFormatError(
+            f"{folder}: people with different joint counts ({sorted(s // 3 for s in sizes)})"
+        )
+    J = sizes.pop() // 3
+    a = np.stack([r for _, r in rows]).reshape(len(rows), J, 3)
+    found = a[..., 2] > 0
+    xy = np.where(found[..., None], a[..., :2], np.nan)
+    score = np.where(found, a[..., 2], np.nan)
+    return np.asarray([n for n, _ in rows], dtype=np.int64), xy, score
 
 
 def read_openpose(folder: Path) -> Keypoints2D:

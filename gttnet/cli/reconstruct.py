@@ -211,8 +211,14 @@ def _resolve_input(
     seed,
     split=None,
     skeleton=None,
+    subject=0,
+    n_subjects=1,
 ) -> dict:
-    """The run's input: a recording (calibration + keypoints, project file, Pose2Sim/anipose folder) or a file."""
+    """The run's input: a recording (calibration + keypoints, project file, Pose2Sim/anipose folder) or a file.
+
+    A recording whose keypoint files hold several people gives the view of person ``subject`` of the
+    ``n_subjects`` most cameras agree on (:func:`gttnet.recording.choose_subjects`).
+    """
     from gttnet.recording import load_view, recording_spec
 
     spec = recording_spec(
@@ -236,7 +242,13 @@ def _resolve_input(
             lg.addHandler(handler)
         try:
             recording, view, gt = load_view(
-                spec, sequencing, min_confidence=min_confidence, weights=weights, seed=seed or 0
+                spec,
+                sequencing,
+                min_confidence=min_confidence,
+                weights=weights,
+                seed=seed or 0,
+                subject=subject,
+                n_subjects=n_subjects,
             )
         finally:
             for lg in loggers:
@@ -434,8 +446,9 @@ def _resolve_input(
     type=click.IntRange(1, 2),
     default=1,
     show_default=True,
-    help="Subjects per image with no identity across images (2: joints are two stacked skeletons; "
-    "their order is shuffled per image, then clustered by affinity).",
+    help="People to reconstruct. A recording: the N people most cameras agree on, associated across the "
+    "unsynchronized cameras and through time, each written to OUT_p0, OUT_p1... A stored capture: 2 stacked "
+    "skeletons per image with no identity across images (shuffled per image, then clustered by affinity).",
 )
 @click.option(
     "--window",
@@ -499,8 +512,7 @@ def reconstruct_cmd(
       gttnet reconstruct --calibration runs/recording/calibration.toml --keypoints runs/recording/cam_0 runs/recording/cam_1 runs/recording/cam_2 --fps 10 --out runs/recording/result.trc
       gttnet reconstruct data/gttdata/tiny/test/shard-00000.h5 --sample 1 --method dloe --sequencing partial --out runs/rec.h5
     """
-    from gttnet.methods import check_sequencing, method_spec, reconstruct
-    from gttnet.recording import export_keypoints_on_clock, marker_names, plain, timing_options, write_outputs
+    from gttnet.methods import method_spec
 
     method = method or _method_default()
     if subjects > 1 and method == "auto":
@@ -516,9 +528,7 @@ def reconstruct_cmd(
 
     trc = {"up": up, "filter": parse_filter(filter_spec), "names": None}
     options = _gttnet_options(method, model_path, refine)
-    inp = _resolve_input(
-        input_paths,
-        weights,
+    resolve = dict(
         calibration=calibration,
         keypoints=keypoints,
         fps=fps,
@@ -535,9 +545,61 @@ def reconstruct_cmd(
         split=split,
         skeleton=skeleton,
     )
+    run = dict(
+        method=method,
+        options=options,
+        subjects=subjects,
+        window_arg=window_arg,
+        resample_hz=resample_hz,
+        trc=trc,
+        export_keypoints=export_keypoints,
+        overwrite=overwrite,
+        seed=seed,
+        progress=progress and not quiet,
+        quiet=quiet,
+        sequencing_given=sequencing is not None,
+    )
+    inp = _resolve_input(input_paths, weights, **resolve)
+    if subjects > 1 and inp["loaded"] is None:
+        # A recording with several people: one reconstruction per person (stable ids by cross-view
+        # support), each written to its own files (result_p0.trc, result_p1.trc, ...).
+        summaries = []
+        for k in range(subjects):
+            inp_k = _resolve_input(input_paths, weights, **resolve, subject=k, n_subjects=subjects)
+            outs = [str(Path(o).with_name(f"{Path(o).stem}_p{k}{Path(o).suffix}")) for o in out_paths]
+            export = None if export_keypoints is None else f"{export_keypoints}_p{k}"
+            summary = _solve_and_write(
+                inp_k, {**run, "subjects": 1, "export_keypoints": export}, spec_m, outs
+            )
+            summaries.append({"subject": k, **summary})
+        _print(summaries[0] | {"subjects": summaries}, as_json, [o for o in out_paths])
+        return
+    summary = _solve_and_write(inp, run, spec_m, list(out_paths))
+    _print(summary, as_json, out_paths)
+
+
+def _print(summary: dict, as_json: bool, out_paths) -> None:
+    from gttnet.recording import plain
+
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    if "subjects" in summary:
+        for s in summary["subjects"]:
+            click.echo(" ".join(f"{k}={plain(v)}" for k, v in s.items()))
+        return
+    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
+    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+
+
+def _solve_and_write(inp: dict, run: dict, spec_m, out_paths: list[str]) -> dict:
+    """Run the method on the resolved input, write its outputs, and return the summary."""
+    from gttnet.methods import check_sequencing, reconstruct
+    from gttnet.recording import export_keypoints_on_clock, marker_names, timing_options, write_outputs
+
+    method, options, quiet, progress = run["method"], run["options"], run["quiet"], run["progress"]
     loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
-    progress = progress and not quiet
-    if sequencing is None and not quiet:
+    if not run["sequencing_given"] and not quiet:
         click.echo(
             f"sequencing: {obs.sequencing} (the richest the input supports; "
             "choose with --sequencing none|partial|full)",
@@ -554,22 +616,20 @@ def reconstruct_cmd(
         )
     held: list[str] = []
     try:
-        if subjects > 1:
-            if loaded is None:
-                raise click.UsageError("--subjects 2 applies to shard / .mat / .json inputs")
+        if run["subjects"] > 1:
             from gttnet.apps.multi_subject import reconstruct_loaded_subjects
 
             rec, summary = reconstruct_loaded_subjects(
-                loaded, method=method, n_subjects=subjects, seed=seed or 0, **options
+                loaded, method=method, n_subjects=run["subjects"], seed=run["seed"] or 0, **options
             )
-        elif window_arg is not None:
+        elif run["window_arg"] is not None:
             from gttnet.windowed import reconstruct_windowed
 
             with _time_warnings_held() as held:
                 rec = reconstruct_windowed(
                     obs,
                     method,
-                    window=window_arg,
+                    window=run["window_arg"],
                     progress=progress,
                     **timing_options(method, view),
                     **options,
@@ -592,25 +652,26 @@ def reconstruct_cmd(
                 rec,
                 view,
                 out_paths,
-                resample_hz,
+                run["resample_hz"],
                 image_index=inp["image_index"],
                 source=inp["source"],
                 recording_json=inp["recording_json"],
-                trc=trc | {"names": marker_names(inp.get("skeleton"), obs)},
+                trc=run["trc"] | {"names": marker_names(inp.get("skeleton"), obs)},
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from exc
         finally:
             logging.getLogger("gttnet.recording").removeHandler(handler)
-    if export_keypoints is not None:
+    if run["export_keypoints"] is not None:
         export_keypoints_on_clock(
-            inp.get("recording"), rec, view, export_keypoints, rate_hz=resample_hz, overwrite=overwrite
+            inp.get("recording"),
+            rec,
+            view,
+            run["export_keypoints"],
+            rate_hz=run["resample_hz"],
+            overwrite=run["overwrite"],
         )
-    if as_json:
-        click.echo(json.dumps(summary))
-        return
-    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
-    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+    return summary
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
