@@ -584,6 +584,7 @@ def reconstruct_cmd(
     summary.update(_timing_fields(rec, view, quiet=quiet, held=held))
     if blind:
         summary["images_without_joints"] = blind
+    rec = _assess(rec, obs, summary)
     if out_paths:
         handler = _WarningLines(logging.WARNING)
         logging.getLogger("gttnet.recording").addHandler(handler)
@@ -609,8 +610,30 @@ def reconstruct_cmd(
     if as_json:
         click.echo(json.dumps(summary))
         return
+    quality = summary.pop("quality", None)
+    summary.pop("auto", None)
     parts = [f"{k}={plain(v)}" for k, v in summary.items()]
     click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+    if quality is not None:
+        click.echo(
+            f"quality: expected error ~{quality['expected_error_mm']:.1f} mm; {'; '.join(quality['reasons'])}"
+        )
+
+
+def _assess(rec, obs, summary: dict):
+    """``rec`` self-assessed (windowed runs assess the whole), with ``quality`` and ``auto`` in ``summary``.
+
+    Multi-subject results (rows per subject) are left as they are.
+    """
+    from gttnet.methods import assessed
+
+    if rec.n_images != obs.n_images:
+        return rec
+    rec = assessed(rec, obs)
+    summary["quality"] = rec.info["quality"]
+    if "auto" in rec.info:
+        summary["auto"] = rec.info["auto"]
+    return rec
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
