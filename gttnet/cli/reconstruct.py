@@ -607,6 +607,11 @@ def reconstruct_cmd(
         export_keypoints_on_clock(
             inp.get("recording"), rec, view, export_keypoints, rate_hz=resample_hz, overwrite=overwrite
         )
+    _echo_summary(summary, out_paths, as_json, plain)
+
+
+def _echo_summary(summary: dict, out_paths, as_json: bool, plain) -> None:
+    """One JSON object, or one ``key=value`` line and the self-assessment's ``quality:`` line."""
     if as_json:
         click.echo(json.dumps(summary))
         return
