@@ -611,18 +611,18 @@ def reconstruct_cmd(
 
 
 def _echo_summary(summary: dict, out_paths, as_json: bool, plain) -> None:
-    """One JSON object, or one ``key=value`` line and the self-assessment's ``quality:`` line."""
+    """One JSON object, or the self-assessment's ``quality:`` line then one ``key=value`` line."""
     if as_json:
         click.echo(json.dumps(summary))
         return
     quality = summary.pop("quality", None)
     summary.pop("auto", None)
-    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
-    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
-    if quality is not None:
+    if quality is not None:  # before the summary line, which stays the last line of the output
         click.echo(
             f"quality: expected error ~{quality['expected_error_mm']:.1f} mm; {'; '.join(quality['reasons'])}"
         )
+    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
+    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
 
 
 def _assess(rec, obs, summary: dict):
