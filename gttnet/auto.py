@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -114,34 +114,41 @@ def candidates(
     *,
     fps: float | Sequence[float] | Mapping[int, float] | None = None,
     frame_times_s: np.ndarray | None = None,
-) -> list[tuple[str, dict[str, Any]]]:
+) -> Iterator[tuple[str, dict[str, Any]]]:
     """The methods ``auto`` tries on ``obs``, in the order it tries them, with their options.
+
+    A generator: the order-free candidates are only looked up (which loads the GTT-Net module, and torch)
+    when ``auto`` gets that far, so a decisive classical first candidate never loads torch.
 
     Args:
         obs: Observations of any sequencing condition.
         fps: Nominal per-camera rates for clock recovery.
         frame_times_s: Per-image times on each camera's clock, for clock recovery.
 
-    Returns:
-        ``[(method, options), ...]`` in the order ``auto`` runs them: the most informed (on matching input
-        the most accurate) first, except without sequencing, where the cheap learned model runs before
+    Yields:
+        ``(method, options)`` in the order ``auto`` runs them: the most informed (on matching input the most
+        accurate) first, except without sequencing, where the cheap learned model runs before
         ``stream-sync`` (both always run, to check each other).
     """
+    clocks = {"fps": fps, "frame_times_s": frame_times_s}
+    if obs.sequencing == "full":
+        yield "hpf", {"spacing": "time"}
+        yield "sync", clocks
+    elif obs.sequencing == "partial":
+        yield "sync", clocks
     from gttnet.sync.method import order_free_fallback
 
-    learned = order_free_fallback(obs)
-    order_free: list[tuple[str, dict[str, Any]]] = [("gttnet", {})] if learned == "gttnet" else []
-    order_free.append(("dloe", {}))
-    if obs.sequencing == "full":
-        return [
-            ("hpf", {"spacing": "time"}),
-            ("sync", {"fps": fps, "frame_times_s": frame_times_s}),
-            *order_free,
-        ]
-    if obs.sequencing == "partial":
-        return [("sync", {"fps": fps, "frame_times_s": frame_times_s})] + order_free
-    # the cheap learned model first, then the clocks on estimated streams: both always run (MIN_TRIED)
-    return [*order_free[:1], ("stream-sync", {"fps": fps, "fallback": None}), *order_free[1:], ("pseudo", {})]
+    learned = order_free_fallback(obs) == "gttnet"
+    if obs.sequencing == "none":
+        if learned:
+            yield "gttnet", {}
+        yield "stream-sync", {"fps": fps, "fallback": None}
+        yield "dloe", {}
+        yield "pseudo", {}
+        return
+    if learned:
+        yield "gttnet", {}
+    yield "dloe", {}
 
 
 def decisive(quality: Mapping[str, Any]) -> bool:

@@ -250,7 +250,7 @@ def _auto_winner(obs: Observations, rec, options: dict) -> tuple:
     from gttnet.auto import candidates
 
     ran = rec.info["auto"]["ran"]
-    opts = dict(candidates(obs, **options))[ran]
+    opts = next(o for m, o in candidates(obs, **options) if m == ran)
     auto = {**rec.info["auto"], "why": rec.info["auto"]["why"] + " (selected on the first window)"}
     return method_spec(ran), opts, {"method_ran": ran, "auto": auto}
 
