@@ -8,7 +8,7 @@ __all__ = ["BUILTIN_METHODS"]
 #: module only: ``gttnet`` (torch) costs about a second of start-up that ``dloe`` or ``sync`` never needs.
 #: ``tests/gttnet/test_baselines.py`` checks this table against what the modules register.
 BUILTIN_METHODS: dict[str, str] = {
-    "auto": "gttnet.sync.method",
+    "auto": "gttnet.auto",
     "dct": "gttnet.baselines.trajectory_basis",
     "dloe": "gttnet.baselines.dloe",
     "gttnet": "gttnet.model.inference",

@@ -48,6 +48,7 @@ __all__ = [
     "method_spec",
     "check_sequencing",
     "blank_unobserved",
+    "assessed",
 ]
 
 log = logging.getLogger(__name__)
@@ -70,7 +71,11 @@ class Reconstruction:
         seconds: Wall-clock time of the method, seconds.
         method: Registered method name.
         sequencing: Sequencing condition of the input (``"none"``, ``"partial"`` or ``"full"``).
-        info: Method-specific diagnostics (iterations, chosen hyper-parameters...), JSON-serialisable.
+        info: Method-specific diagnostics (iterations, chosen hyper-parameters...), JSON-serialisable;
+            :func:`reconstruct` adds ``quality``, the self-assessment of :func:`gttnet.quality.assess`.
+        uncertainty_mm: Per-point uncertainty, millimetres, shape ``(N, J)``: the bound each joint's 3-D
+            error stays below at ``info["quality"]["interval_rate"]`` (None until :func:`reconstruct`
+            assesses the reconstruction; NaN where a joint is not reconstructed).
     """
 
     points3d: np.ndarray
@@ -80,6 +85,7 @@ class Reconstruction:
     method: str = ""
     sequencing: str = "none"
     info: dict[str, Any] = field(default_factory=dict, compare=False)
+    uncertainty_mm: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         X = np.asarray(self.points3d, dtype=np.float64)
@@ -274,7 +280,21 @@ def reconstruct(obs: Observations, method: str, **options: Any) -> Reconstructio
         )
     log.info("%s (%s): %d images in %.2f s", method, obs.sequencing, obs.n_images, seconds)
     rec = replace(rec, order=order, seconds=seconds, method=method, sequencing=obs.sequencing)
-    return blank_unobserved(rec, obs)
+    return assessed(blank_unobserved(rec, obs), obs)
+
+
+def assessed(rec: Reconstruction, obs: Observations) -> Reconstruction:
+    """``rec`` with its self-assessment: ``info["quality"]`` and ``uncertainty_mm`` (:mod:`gttnet.quality`).
+
+    Computed from ``obs`` and ``rec`` only (no ground truth); a method that assessed itself (``auto``
+    passes on its chosen candidate's) keeps its own.
+    """
+    from gttnet.quality import assess
+
+    if "quality" in rec.info and rec.uncertainty_mm is not None:
+        return rec
+    quality, unc = assess(obs, rec)
+    return replace(rec, info={**rec.info, "quality": quality}, uncertainty_mm=unc)
 
 
 def blank_unobserved(rec: Reconstruction, obs: Observations) -> Reconstruction:

@@ -240,6 +240,21 @@ def _local_rank(rec: Reconstruction, t_local: np.ndarray) -> np.ndarray:
     return order
 
 
+def _auto_winner(obs: Observations, rec, options: dict) -> tuple:
+    """``auto`` selects on the first window only; its winner, with its options, solves the others (linear time).
+
+    Returns:
+        ``(spec, options, info)``: the winner's registry entry, its options over the whole capture and the
+        ``method_ran`` / ``auto`` entries for the stitched result's ``info``.
+    """
+    from gttnet.auto import candidates
+
+    ran = rec.info["auto"]["ran"]
+    opts = next(o for m, o in candidates(obs, **options) if m == ran)
+    auto = {**rec.info["auto"], "why": rec.info["auto"]["why"] + " (selected on the first window)"}
+    return method_spec(ran), opts, {"method_ran": ran, "auto": auto}
+
+
 def reconstruct_windowed(
     obs: Observations,
     method: str,
@@ -315,6 +330,7 @@ def reconstruct_windowed(
         dynamic_ncols=True,
     )
     done = 0
+    info_auto: dict = {}
     for w in range(len(plan)):
         sub, rows = subset_observations(obs, plan.window(w))
         # Per-image options (e.g. frame_times_s) follow the window's images.
@@ -323,6 +339,8 @@ def reconstruct_windowed(
             for k, v in options.items()
         }
         rec = spec.fn(sub, **opts)
+        if w == 0 and method == "auto":
+            spec, options, info_auto = _auto_winner(obs, rec, options)
         win = plan.window(w)
         srt = np.argsort(win)
         weight = plan.weights(w)[srt[np.searchsorted(win[srt], rows)]]
@@ -349,6 +367,7 @@ def reconstruct_windowed(
         "clock": clock,
         "seconds_per_window": (time.perf_counter() - t_win) / len(plan),
     }
+    info.update(info_auto)
     rec = Reconstruction(
         points3d=X,
         affinity=None,

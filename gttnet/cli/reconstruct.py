@@ -579,17 +579,39 @@ def reconstruct_cmd(
 
 
 def _print(summary: dict, as_json: bool, out_paths) -> None:
+    """One JSON object, or per subject the self-assessment's ``quality:`` line then one ``key=value`` line."""
     from gttnet.recording import plain
 
     if as_json:
         click.echo(json.dumps(summary))
         return
-    if "subjects" in summary:
-        for s in summary["subjects"]:
-            click.echo(" ".join(f"{k}={plain(v)}" for k, v in s.items()))
-        return
-    parts = [f"{k}={plain(v)}" for k, v in summary.items()]
-    click.echo(" ".join(parts) + (f" -> {', '.join(out_paths)}" if out_paths else ""))
+    for one in summary["subjects"] if "subjects" in summary else [summary]:
+        one = dict(one)
+        quality = one.pop("quality", None)
+        one.pop("auto", None)
+        if quality is not None:  # before the summary line, which stays the last line of the output
+            click.echo(
+                f"quality: expected error ~{quality['expected_error_mm']:.1f} mm; {'; '.join(quality['reasons'])}"
+            )
+        parts = [f"{k}={plain(v)}" for k, v in one.items()]
+        outs = out_paths if "subjects" not in summary else []
+        click.echo(" ".join(parts) + (f" -> {', '.join(outs)}" if outs else ""))
+
+
+def _assess(rec, obs, summary: dict):
+    """``rec`` self-assessed (windowed runs assess the whole), with ``quality`` and ``auto`` in ``summary``.
+
+    Multi-subject results (rows per subject) are left as they are.
+    """
+    from gttnet.methods import assessed
+
+    if rec.n_images != obs.n_images:
+        return rec
+    rec = assessed(rec, obs)
+    summary["quality"] = rec.info["quality"]
+    if "auto" in rec.info:
+        summary["auto"] = rec.info["auto"]
+    return rec
 
 
 def _solve_and_write(inp: dict, run: dict, spec_m, out_paths: list[str]) -> dict:
@@ -644,6 +666,7 @@ def _solve_and_write(inp: dict, run: dict, spec_m, out_paths: list[str]) -> dict
     summary.update(_timing_fields(rec, view, quiet=quiet, held=held))
     if blind:
         summary["images_without_joints"] = blind
+    rec = _assess(rec, obs, summary)
     if out_paths:
         handler = _WarningLines(logging.WARNING)
         logging.getLogger("gttnet.recording").addHandler(handler)

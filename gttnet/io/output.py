@@ -28,6 +28,8 @@ def _payload(rec: Reconstruction, image_index: np.ndarray | None) -> tuple[dict,
         arrays["affinity"] = rec.affinity.astype(np.float64)
     if rec.order is not None:
         arrays["order"] = rec.order.astype(np.int64)
+    if rec.uncertainty_mm is not None:
+        arrays["joint_uncertainty_mm"] = np.asarray(rec.uncertainty_mm, dtype=np.float64)
     attrs = {
         "format_version": OUTPUT_VERSION,
         "method": rec.method,
@@ -55,7 +57,8 @@ def write_reconstruction(
     Written atomically (in memory, then temporary file, fsync, rename); a failed write raises one
     :class:`~gttdata.errors.OutputError` line naming ``path``. Contents: ``points3d`` (N, J, 3) float64 metres,
     ``image_index`` (N,) int64 (stored index in the input file of each row), ``affinity`` (N, N) and
-    ``order`` (N,) when the method produced them; attributes ``format_version``, ``method``,
+    ``order`` (N,) when the method produced them, ``joint_uncertainty_mm`` (N, J) float64 millimetres when
+    the reconstruction was self-assessed (:mod:`gttnet.quality`); attributes ``format_version``, ``method``,
     ``sequencing``, ``seconds``, ``units`` (``"m"``), ``n_images``, ``n_joints``, ``info`` (JSON) and
     ``source``. In NPZ files the attributes are 0-d arrays of the same names.
 
@@ -107,7 +110,17 @@ def read_reconstruction(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         ``(arrays, attrs)``: the datasets by name and the attributes (``info`` parsed from JSON).
     """
     path = Path(path)
-    names = ("points3d", "image_index", "affinity", "order", "cam_id", "frame", "time_s", "time_order")
+    names = (
+        "points3d",
+        "image_index",
+        "affinity",
+        "order",
+        "joint_uncertainty_mm",
+        "cam_id",
+        "frame",
+        "time_s",
+        "time_order",
+    )
     if path.suffix.lower() == ".npz":
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in names if k in z.files}

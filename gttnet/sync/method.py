@@ -30,7 +30,6 @@ __all__ = [
     "STREAM_SYNC_MAX_RMS_PX",
     "count_rates",
     "order_free_fallback",
-    "reconstruct_auto",
     "reconstruct_stream_sync",
     "reconstruct_sync",
     "time_checks",
@@ -328,47 +327,3 @@ def order_free_fallback(obs: Observations) -> str:
     else:
         bundled = BUNDLED_POINTNET_MODEL.is_file()
     return "gttnet" if bundled else "dloe"
-
-
-@register_method(
-    "auto",
-    requires="none",
-    summary="the most accurate method for the input's sequencing: hpf (full), sync (partial), stream-sync (none)",
-)
-def reconstruct_auto(
-    obs: Observations,
-    *,
-    fps: float | Sequence[float] | Mapping[int, float] | None = None,
-    frame_times_s: np.ndarray | None = None,
-) -> Reconstruction:
-    """Run the method :data:`AUTO` picks for ``obs.sequencing``.
-
-    Args:
-        obs: Observations of any sequencing condition.
-        fps: Nominal per-camera rates, passed to ``sync`` and ``stream-sync`` (unused under ``full``).
-        frame_times_s: Per-image times on each camera's clock, passed to ``sync``.
-
-    Returns:
-        The chosen method's reconstruction; ``info["method_ran"]`` names it. Under ``partial``, where the
-        clocks cannot be recovered, :func:`order_free_fallback`'s method runs instead, with the reason in
-        ``info["sync_failed"]``.
-    """
-    from gttnet.methods import reconstruct
-
-    name, options = AUTO[obs.sequencing]
-    if name == "sync":
-        options = {**options, "fps": fps, "frame_times_s": frame_times_s}
-    elif name == "stream-sync":
-        options = {**options, "fps": fps, "fallback": order_free_fallback(obs)}
-    try:
-        rec = reconstruct(obs, name, **options)
-    except GttNetError as exc:
-        if name != "sync":
-            raise
-        # Clocks that cannot be recovered (e.g. a camera with fewer than three images): the order-free
-        # method still uses each camera's frame order (neighbourhoods and chain), as stream-sync's does.
-        name = order_free_fallback(obs)
-        log.warning("auto: clock recovery failed (%s); %s reconstructs the capture instead", exc, name)
-        rec = reconstruct(obs, name)
-        rec = replace(rec, info={**rec.info, "sync_failed": str(exc)})
-    return replace(rec, info={**rec.info, "method_ran": rec.info.get("method_ran", name)})

@@ -1,0 +1,324 @@
+"""Out-of-distribution benchmark of ``auto`` and of the self-assessment (``quality``) it selects with.
+
+Run (the test half is only reported, never tuned on):
+    python benchmarks/bench_auto.py --split test --n-seq 3
+    python benchmarks/bench_auto.py --split val --n-seq 2 --cells walk_1px_drop30,quadruped
+    python benchmarks/bench_auto.py --rows runs/bench_auto/test.jsonl --table   # re-print from saved rows
+    python benchmarks/bench_auto.py --recipes recipes/gttdata/paper.yaml,recipes/gttdata/default.yaml \
+        --split val --n-seq 8 --no-auto --rows runs/bench_auto/fit.jsonl       # calibration captures
+    python benchmarks/bench_auto.py --fit runs/bench_auto/fit.jsonl --check runs/bench_auto/test.jsonl
+
+Cells are the recipes under ``recipes/gttdata/ood/`` (periodic walks with 30 % missing joints at 1 and 5 px,
+25/50/60 Hz and mixed rates, non-uniform timestamps, far cameras, pan-tilt-zoom cameras, a quadruped, a wrongly
+declared frame rate, a blind camera); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
+Per capture and sequencing condition every candidate method runs (``gttnet.auto.candidates`` for that
+condition, order-free methods included), then ``auto`` itself. Per cell it prints each method's mean MPJPE,
+auto's picks, auto's regret (its MPJPE over the best method's on the same capture and condition: the best
+method runnable with that much sequencing or less), the self-assessment's ``expected_error_mm`` against the
+truth (fraction within [0.5x, 2x]) and auto's time over the fastest candidate within 5 % of the best.
+Pan-tilt-zoom cameras (a camera pose per image) are the `ptz` cell (the generator's `capture.ptz_prob`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from gttdata.capture.views import make_view  # noqa: E402
+from gttdata.generate_plan import build_sample  # noqa: E402
+from gttdata.recipe import load_recipe  # noqa: E402
+from gttnet.evaluate.metrics import mpjpe_mm  # noqa: E402
+from gttnet.methods import reconstruct  # noqa: E402
+from gttnet.quality import EXTRAS, FEATURES, ROUGHNESS_FLOOR, features  # noqa: E402
+
+OOD = Path(__file__).resolve().parents[1] / "recipes" / "gttdata" / "ood"
+#: Per-cell changes to the observations: a declared frame rate that is wrong, a camera that sees nothing.
+CELL_FPS = {"wrong_rate": 30.0}
+CELL_BLIND = {"blind_camera": 0}
+SEQS = ("none", "partial", "full")
+#: Multiples of the per-point uncertainty (over its interval factor) at which the coverage is recorded.
+COVER_AT = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
+
+
+def _coverage(rec, gt) -> dict:
+    """Fraction of the points whose true 3-D error is within k x the stated uncertainty, for k in COVER_AT."""
+    from gttnet.quality import CALIBRATION
+
+    if rec.uncertainty_mm is None:
+        return {}
+    err = 1000.0 * np.linalg.norm(rec.points3d - gt.points3d, axis=-1)
+    unc = rec.uncertainty_mm / float(CALIBRATION["interval_factor"])
+    ok = np.isfinite(err) & np.isfinite(unc)
+    return {
+        "covered": float(np.mean(err[ok] <= rec.uncertainty_mm[ok])),
+        "cover_at": [round(float(np.mean(err[ok] <= k * unc[ok])), 4) for k in COVER_AT],
+    }
+
+
+def _cell_view(sample, seq: str, cell: str):
+    """The capture's view under ``seq`` with the cell's input faults applied, and timing options."""
+    obs, gt = make_view(sample, seq)
+    opts: dict = {}
+    if cell in CELL_BLIND:
+        blind = obs.cam_id == CELL_BLIND[cell]
+        vis = obs.visible.copy()
+        vis[blind] = False
+        kp = obs.keypoints_px.copy()
+        kp[blind] = np.nan
+        obs = replace(obs, visible=vis, keypoints_px=kp)
+    if cell in CELL_FPS and seq != "none":
+        hz = CELL_FPS[cell]
+        obs = replace(obs, stream_time_s=np.asarray(obs.stream_index, dtype=np.float64) / hz)
+        opts["fps"] = hz
+    elif cell in CELL_FPS:
+        opts["fps"] = CELL_FPS[cell]
+    if obs.stream_time_s is not None:
+        opts["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
+    return obs, gt, opts
+
+
+def _scalar(v):
+    return None if v is None or not np.isfinite(v) else round(float(v), 4)
+
+
+def run_capture(sample, cell: str, *, with_auto: bool = True) -> list[dict]:
+    """One row per (sequencing, method) of one capture; ``auto`` rows name the pick and the candidates."""
+    from gttnet.auto import candidates
+
+    rows = []
+    for seq in SEQS:
+        obs, gt, timing = _cell_view(sample, seq, cell)
+        for name, options in candidates(obs, **timing):
+            t0 = time.perf_counter()
+            try:
+                rec = reconstruct(obs, name, **options)
+            except Exception as exc:  # a candidate that cannot run on this input (reported, not fatal)
+                rows.append(
+                    {
+                        "cell": cell,
+                        "capture": sample.name,
+                        "sequencing": seq,
+                        "method": name,
+                        "error": str(exc).split("\n")[0],
+                    }
+                )
+                continue
+            sec = time.perf_counter() - t0
+            f = features(obs, rec)
+            row = {
+                "cell": cell,
+                "capture": sample.name,
+                "sequencing": seq,
+                "method": name,
+                "mpjpe_mm": mpjpe_mm(rec.points3d, gt.points3d),
+                "seconds": sec,
+                "expected_error_mm": rec.info.get("quality", {}).get("expected_error_mm"),
+            }
+            row.update(_coverage(rec, gt))
+            row.update({k: _scalar(f[k]) for k in (*EXTRAS, *FEATURES)})
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+        if with_auto:
+            t0 = time.perf_counter()
+            rec = reconstruct(obs, "auto", **timing)
+            row = {
+                "cell": cell,
+                "capture": sample.name,
+                "sequencing": seq,
+                "method": "auto",
+                "mpjpe_mm": mpjpe_mm(rec.points3d, gt.points3d),
+                "seconds": time.perf_counter() - t0,
+                "expected_error_mm": rec.info.get("quality", {}).get("expected_error_mm"),
+                "auto": rec.info.get("auto"),
+            }
+            row.update(_coverage(rec, gt))
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
+def collect(recipes: list[tuple[str, str]], split: str, n_seq: int, with_auto: bool) -> list[dict]:
+    """Rows of every capture of every (cell, recipe path)."""
+    rows = []
+    for cell, path in recipes:
+        recipe = load_recipe(path, [])
+        for i in range(n_seq):
+            sample = build_sample(recipe, split, i)[0]
+            rows += run_capture(sample, cell, with_auto=with_auto)
+    return rows
+
+
+def _ratio_ok(pred, true) -> bool:
+    return pred is not None and 0.5 * pred <= true <= 2.0 * pred
+
+
+def table(rows: list[dict]) -> str:
+    """Per cell and sequencing: methods' mean MPJPE, auto's picks, regret, calibration, cost."""
+    ok_rows = [r for r in rows if "mpjpe_mm" in r]
+    out = [
+        "| cell | seq | methods: mean MPJPE mm | auto mm | auto picks | regret mean / max | "
+        "quality within [0.5x, 2x] | auto s / best method's s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    regrets, calib, costs = [], [], []
+    for cell in dict.fromkeys(r["cell"] for r in ok_rows):
+        for seq in SEQS:
+            sel = [r for r in ok_rows if r["cell"] == cell and r["sequencing"] == seq]
+            if not sel:
+                continue
+            methods = [m for m in dict.fromkeys(r["method"] for r in sel) if m != "auto"]
+            means = {m: np.mean([r["mpjpe_mm"] for r in sel if r["method"] == m]) for m in methods}
+            reg, cal, cost, picks = [], [], [], []
+            for cap in dict.fromkeys(r["capture"] for r in sel):
+                cr = {r["method"]: r for r in sel if r["capture"] == cap}
+                cands = [cr[m] for m in methods if m in cr]
+                best = min(c["mpjpe_mm"] for c in cands)
+                cal += [_ratio_ok(c["expected_error_mm"], c["mpjpe_mm"]) for c in cands]
+                if "auto" in cr:
+                    a = cr["auto"]
+                    reg.append(a["mpjpe_mm"] / best)
+                    cal.append(_ratio_ok(a["expected_error_mm"], a["mpjpe_mm"]))
+                    picks.append((a.get("auto") or {}).get("ran", "?"))
+                    top = min(cands, key=lambda c: c["mpjpe_mm"])
+                    cost.append(a["seconds"] / top["seconds"])
+            regrets += reg
+            calib += cal
+            costs += cost
+            ms = ", ".join(f"{m} {v:.1f}" for m, v in means.items())
+            am = np.mean([r["mpjpe_mm"] for r in sel if r["method"] == "auto"]) if reg else float("nan")
+            pk = ", ".join(f"{p}×{picks.count(p)}" for p in dict.fromkeys(picks))
+            rg = f"{np.mean(reg):.3f} / {np.max(reg):.3f}" if reg else "-"
+            cs = f"{np.median(cost):.2f}" if cost else "-"
+            out.append(f"| {cell} | {seq} | {ms} | {am:.1f} | {pk} | {rg} | {np.mean(cal):.0%} | {cs} |")
+    if regrets:
+        out.append(
+            f"\nauto regret: median {np.median(regrets):.3f}, max {np.max(regrets):.3f}, "
+            f"{np.mean(np.asarray(regrets) <= 1.10):.0%} of captures <= 1.10; cost median "
+            f"{np.median(costs):.2f}x, max {np.max(costs):.2f}x the best method's time"
+        )
+        out.append(_no_regression(ok_rows))
+    if calib:
+        out.append(
+            f"quality: true MPJPE within [0.5x, 2x] of expected_error_mm in {np.mean(calib):.1%} "
+            f"of {len(calib)} reconstructions"
+        )
+        out.append(_coverage_line(ok_rows))
+    return "\n".join(out)
+
+
+def _derived(r: dict) -> dict:
+    """The ratios of :data:`gttnet.quality.FEATURES` and ``excess_mm`` from a row's raw evidence."""
+    n = r["noise_mm"]
+    s = max(r["sigma_px"] or r["residual_px"], 0.1)
+    r.setdefault("holdout_ratio", r["holdout_mm"] / n)
+    r.setdefault("roughness_ratio", r["roughness_mm"] / n + ROUGHNESS_FLOOR)
+    r.setdefault("excess_mm", float(np.sqrt(max(r["residual_px"] ** 2 - s**2, 0.0)) * n / s))
+    return r
+
+
+def _no_regression(rows: list[dict]) -> str:
+    """Auto given each camera's frame order against HPF given the true timestamps, same captures."""
+    ratios = []
+    for cell, cap in dict.fromkeys((r["cell"], r["capture"]) for r in rows):
+        a = [
+            r
+            for r in rows
+            if (r["cell"], r["capture"], r["sequencing"], r["method"]) == (cell, cap, "partial", "auto")
+        ]
+        h = [
+            r
+            for r in rows
+            if (r["cell"], r["capture"], r["sequencing"], r["method"]) == (cell, cap, "full", "hpf")
+        ]
+        if a and h:
+            ratios.append(a[0]["mpjpe_mm"] / h[0]["mpjpe_mm"])
+    if not ratios:
+        return ""
+    return (
+        f"auto with each camera's frame order / HPF with true timestamps: median {np.median(ratios):.3f}, "
+        f"{np.mean(np.asarray(ratios) <= 1.05):.0%} of {len(ratios)} captures <= 1.05"
+    )
+
+
+def _coverage_line(rows: list[dict]) -> str:
+    """Mean per-point coverage of the stated uncertainty (its rate is ``interval_rate``)."""
+    from gttnet.quality import CALIBRATION
+
+    cov = [r["covered"] for r in rows if "covered" in r]
+    if not cov:
+        return ""
+    return (
+        f"per-point uncertainty: covers the true 3-D error in {np.mean(cov):.1%} of points (mean over "
+        f"{len(cov)} reconstructions; stated rate {CALIBRATION['interval_rate']:.0%}), median "
+        f"{np.median(cov):.1%}"
+    )
+
+
+def fit(rows: list[dict]) -> dict:
+    """Least-squares fit of log MPJPE on the logs of :data:`gttnet.quality.FEATURES`.
+
+    Only reconstructions whose residual is within the noise (``excess_mm`` at most half the noise at the
+    joints' depth) and without blind images enter: the excess and blind terms have their own forms.
+    """
+    use = [_derived(r) for r in rows if "mpjpe_mm" in r and r["method"] != "auto" and r.get("noise_mm")]
+    use = [r for r in use if r["excess_mm"] <= 0.5 * r["noise_mm"] and not r.get("blind_fraction")]
+    A = np.array([[1.0] + [np.log(r[k]) for k in FEATURES] for r in use])
+    y = np.log([r["mpjpe_mm"] for r in use])
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    resid = y - A @ coef
+    print(
+        f"# fit on {len(use)} reconstructions: residual std {resid.std():.3f} (log), "
+        f"{np.mean(np.abs(resid) <= np.log(2)):.1%} within [0.5x, 2x]",
+        file=sys.stderr,
+    )
+    return {"intercept": round(float(coef[0]), 4), "slopes": [round(float(c), 4) for c in coef[1:]]}
+
+
+def main() -> None:
+    """Command line: see the module docstring."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cells", default="", help="comma-separated cell names (default: every ood recipe)")
+    ap.add_argument("--recipes", default="", help="comma-separated recipe paths instead of the cells")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--n-seq", type=int, default=3, help="captures per cell")
+    ap.add_argument("--no-auto", action="store_true", help="candidates only (calibration captures)")
+    ap.add_argument("--rows", default="", help="JSONL file: written after a run, read with --table (a,b,...)")
+    ap.add_argument("--table", action="store_true", help="print the table of --rows without running")
+    ap.add_argument("--fit", default="", help="fit the calibration on this JSONL and print it")
+    ap.add_argument("--check", default="", help="with --fit: the fraction within [0.5x, 2x] on this JSONL")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    if args.fit:
+        cal = fit([json.loads(x) for x in Path(args.fit).read_text().splitlines()])
+        print(json.dumps(cal))
+        return
+    if args.table:  # several files may be given, comma-separated; lines that are not JSON rows are skipped
+        lines = [x for p in args.rows.split(",") for x in Path(p).read_text().splitlines()]
+        print(table([json.loads(x) for x in lines if x.startswith("{")]))
+        return
+    if args.recipes:
+        recipes = [(Path(p).stem, p) for p in args.recipes.split(",")]
+    else:
+        names = args.cells.split(",") if args.cells else sorted(p.stem for p in OOD.glob("*.yaml"))
+        recipes = [(c, str(OOD / f"{c}.yaml")) for c in names]
+    rows = collect(recipes, args.split, args.n_seq, not args.no_auto)
+    if args.rows:
+        Path(args.rows).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.rows).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    print()
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,240 @@
+"""The ``auto`` method: run the candidates the input's sequencing allows, keep the best by self-assessment.
+
+The candidates (:func:`candidates`) come most-informed first: with the global order the high-pass-filter
+prior on the timestamps, then clock recovery on the streams, then the order-free methods; with each
+camera's frame order clock recovery, then the order-free ones; with neither ``stream-sync`` (streams
+ordered by pose, clocks recovered), the GTT-Net model where a bundled one fits the skeleton, DLOE and the
+pseudo-triangulation. Each reconstruction carries its self-assessment (:mod:`gttnet.quality`,
+``info["quality"]``), raised without sequencing where ``stream-sync`` and an order-free candidate disagree
+by more than their expected errors allow, and with real timing biased towards the most informed candidate;
+``auto`` stops as soon as the best candidate's evidence is decisive (its reprojection residual at the
+capture's own noise floor and its held-out prediction error within the noise: nothing can do clearly
+better; without any sequencing only after a second, independent candidate agreed) and otherwise returns
+the candidate with the smallest ``expected_error_mm``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from gttdata.capture.views import Observations
+from gttnet.errors import GttNetError
+from gttnet.methods import Reconstruction, register_method
+
+__all__ = ["STOP_EXCESS", "STOP_HOLDOUT", "candidates", "decisive", "reconstruct_auto"]
+
+log = logging.getLogger(__name__)
+
+#: A candidate is decisive when its reprojection residual is at most this multiple of the capture's noise...
+STOP_EXCESS = 1.3
+#: ... and its held-out prediction error at most this multiple of the noise at the joints' depth (mm/mm).
+STOP_HOLDOUT = 1.1
+
+
+#: Candidates run before a decisive one may stop the search, by sequencing: without any, the clocks rest
+#: on estimated streams, and only an independent reconstruction can show them wrong (:func:`_agreement`).
+MIN_TRIED = {"none": 2}
+#: How much timing each candidate's result rests on: a disagreement is put on the more informed one.
+INFORMED = {"hpf": 3, "sync": 2, "stream-sync": 2, "gttnet": 1, "dloe": 1, "pseudo": 0}
+
+
+def _agreement(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> list[Reconstruction]:
+    """Raise each candidate's expected error to what its disagreement with the less-informed ones implies.
+
+    Two reconstructions ``a`` and ``b`` a mean distance ``D`` apart cannot both be close to the truth:
+    ``MPJPE(a) >= D - MPJPE(b)``. With ``b``'s expected error for ``MPJPE(b)``, a candidate's expected error
+    becomes at least ``D - expected(b)`` over the less-informed candidates ``b`` (:data:`INFORMED`;
+    agreement between independent methods). The disagreement is put on the more-informed candidate: it rests on more
+    assumptions (clocks, estimated streams) that the images cannot always check, while the order-free
+    ones' own evidence (held-out images) measures their depth errors directly. ``rows`` (the ``auto``
+    report's candidate entries, in the same order) are updated alike.
+    """
+    if len(recs) < 2:
+        return recs
+    own = [
+        float(r.info["quality"].get("own_expected_error_mm", r.info["quality"]["expected_error_mm"]))
+        for r in recs
+    ]
+    out = []
+    for i, a in enumerate(recs):
+        bound, other = 0.0, ""
+        for b in recs:
+            if INFORMED.get(b.method, 0) >= INFORMED.get(a.method, 0):
+                continue
+            d = 1000.0 * np.linalg.norm(a.points3d - b.points3d, axis=-1)
+            dist = float(np.nanmean(d)) if np.isfinite(d).any() else 0.0
+            own_b = float(
+                b.info["quality"].get("own_expected_error_mm", b.info["quality"]["expected_error_mm"])
+            )
+            if dist - own_b > bound:
+                bound, other = dist - own_b, b.info.get("method_ran", b.method)
+        q = {**a.info["quality"], "own_expected_error_mm": own[i]}
+        q["expected_error_mm"] = round(max(own[i], bound), 3)
+        q["reasons"] = [x for x in q["reasons"] if not x.startswith("disagrees")]
+        if bound > own[i]:
+            q["reasons"].append(
+                f"disagrees with {other} by more than their expected errors allow: at least {bound:.1f} mm"
+            )
+        rows[i]["expected_error_mm"] = q["expected_error_mm"]
+        rows[i]["reasons"] = list(q["reasons"])
+        unc = a.uncertainty_mm
+        if unc is not None and own[i] > 0:
+            unc = unc * (q["expected_error_mm"] / own[i])
+        out.append(replace(a, info={**a.info, "quality": q}, uncertainty_mm=unc))
+    return out
+
+
+#: With real timing (timestamps, or each camera's frame order) a less informed candidate replaces the most
+#: informed one only when its expected error is smaller by this factor: two predictions' log errors differ
+#: with a spread of about 0.3 (the calibration's log residual std 0.22, twice), so smaller gaps are noise.
+#: Without sequencing the most informed candidate rests on estimated streams and gets no such prior.
+PREFER_INFORMED = {"full": 1.5, "partial": 1.5, "none": 1.0}
+
+
+def _pick(recs: list[Reconstruction], sequencing: str) -> Reconstruction:
+    """The candidate with the smallest expected error, the less informed ones' taken ``PREFER_INFORMED`` times."""
+    top = max(INFORMED.get(r.method, 0) for r in recs)
+    factor = PREFER_INFORMED.get(sequencing, 1.0)
+
+    def score(r: Reconstruction) -> float:
+        e = float(r.info["quality"]["expected_error_mm"])
+        return e * factor if INFORMED.get(r.method, 0) < top else e
+
+    return min(recs, key=score)
+
+
+def candidates(
+    obs: Observations,
+    *,
+    fps: float | Sequence[float] | Mapping[int, float] | None = None,
+    frame_times_s: np.ndarray | None = None,
+) -> Iterator[tuple[str, dict[str, Any]]]:
+    """The methods ``auto`` tries on ``obs``, in the order it tries them, with their options.
+
+    A generator: the order-free candidates are only looked up (which loads the GTT-Net module, and torch)
+    when ``auto`` gets that far, so a decisive classical first candidate never loads torch.
+
+    Args:
+        obs: Observations of any sequencing condition.
+        fps: Nominal per-camera rates for clock recovery.
+        frame_times_s: Per-image times on each camera's clock, for clock recovery.
+
+    Yields:
+        ``(method, options)`` in the order ``auto`` runs them: the most informed (on matching input the most
+        accurate) first, except without sequencing, where the cheap learned model runs before
+        ``stream-sync`` (both always run, to check each other).
+    """
+    clocks = {"fps": fps, "frame_times_s": frame_times_s}
+    if obs.sequencing == "full":
+        yield "hpf", {"spacing": "time"}
+        yield "sync", clocks
+    elif obs.sequencing == "partial":
+        yield "sync", clocks
+    from gttnet.sync.method import order_free_fallback
+
+    learned = order_free_fallback(obs) == "gttnet"
+    if obs.sequencing == "none":
+        if learned:
+            yield "gttnet", {}
+        yield "stream-sync", {"fps": fps, "fallback": None}
+        yield "dloe", {}
+        yield "pseudo", {}
+        return
+    if learned:
+        yield "gttnet", {}
+    yield "dloe", {}
+
+
+def decisive(quality: Mapping[str, Any]) -> bool:
+    """Whether a candidate's self-assessment leaves nothing to gain from trying the others.
+
+    Its residual is within :data:`STOP_EXCESS` of the capture's measured noise, its held-out error
+    within :data:`STOP_HOLDOUT` of the noise at the joints' depth (thresholds relative to the capture's
+    own noise, never fixed pixels) and every image without observations has its moment (no blind camera
+    left to place).
+    """
+    if quality.get("sigma_px") is None or (quality.get("blind_fraction") or 0.0) > 0.0:
+        return False
+    ex, hold = quality.get("excess"), quality.get("holdout_ratio")
+    if ex is None or hold is None:
+        return False
+    return float(ex) <= STOP_EXCESS and float(hold) <= STOP_HOLDOUT
+
+
+@register_method(
+    "auto",
+    requires="none",
+    summary="try the methods the input's sequencing allows, most informed first; keep the best self-assessed",
+)
+def reconstruct_auto(
+    obs: Observations,
+    *,
+    fps: float | Sequence[float] | Mapping[int, float] | None = None,
+    frame_times_s: np.ndarray | None = None,
+) -> Reconstruction:
+    """Select among :func:`candidates` by their self-assessment (:mod:`gttnet.quality`).
+
+    Args:
+        obs: Observations of any sequencing condition.
+        fps: Nominal per-camera rates, passed to the clock-recovering candidates.
+        frame_times_s: Per-image times on each camera's clock, passed to ``sync``.
+
+    Returns:
+        The chosen candidate's reconstruction; ``info["method_ran"]`` names it and ``info["auto"]`` holds
+        ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, or ``error``
+        for one that could not run) and ``why``.
+    """
+    from gttnet.methods import reconstruct
+
+    tried: list[dict[str, Any]] = []
+    recs: list[Reconstruction] = []
+    why = ""
+    least = MIN_TRIED.get(obs.sequencing, 1)
+    for name, options in candidates(obs, fps=fps, frame_times_s=frame_times_s):
+        t0 = time.perf_counter()
+        try:
+            rec = reconstruct(obs, name, **options)
+        except GttNetError as exc:  # e.g. a camera with too few images for clock recovery
+            log.info("auto: %s cannot run (%s)", name, exc)
+            tried.append({"method": name, "error": str(exc), "seconds": round(time.perf_counter() - t0, 4)})
+            continue
+        q = rec.info.get("quality", {})
+        tried.append(
+            {
+                "method": name,
+                "expected_error_mm": q.get("expected_error_mm"),
+                "seconds": round(time.perf_counter() - t0, 4),
+                "reasons": list(q.get("reasons", [])),
+            }
+        )
+        recs.append(rec)
+        if obs.sequencing == "none":  # with real timing the informed candidates are not second-guessed
+            recs = _agreement(recs, [t for t in tried if "error" not in t])
+        best = _pick(recs, obs.sequencing)
+        if len(recs) >= least and decisive(best.info["quality"]):
+            bq = best.info["quality"]
+            why = (
+                f"residual {bq.get('residual_px')} px at the capture's noise ({bq.get('sigma_px')} px), held-out "
+                f"error {bq.get('holdout_ratio')}x the noise: decisive, the rest not tried"
+            )
+            break
+    if not recs:
+        raise GttNetError(
+            "auto: no candidate could reconstruct the input: "
+            + "; ".join(f"{t['method']}: {t['error']}" for t in tried)
+        )
+    best = _pick(recs, obs.sequencing)
+    ran = best.info.get("method_ran", best.method)
+    pick = (
+        f"{ran}: the smallest expected error ({best.info['quality']['expected_error_mm']} mm) of the "
+        f"{len(tried)} candidates tried"
+    )
+    why = pick if not why else f"{pick}; {why}"
+    auto = {"ran": ran, "candidates": tried, "why": why}
+    return replace(best, info={**best.info, "method_ran": ran, "auto": auto})

@@ -1,0 +1,389 @@
+"""Self-assessment of a reconstruction without ground truth: a predicted MPJPE and a per-joint uncertainty.
+
+Every piece of evidence comes from the input and the reconstruction alone:
+
+* **noise** ``sigma_px``: the capture's own 2-D keypoint noise (:func:`gttnet.geometry.noise.stream_noise_px`)
+  along each camera's frames, in the given stream order, else in the order the method recovered;
+* **residual** ``residual_px``: how far the reconstruction reprojects from the 2-D observations (robust
+  per-axis spread, pixels). A residual far above the noise means the structure does not explain the images
+  (wrong clocks, a wrong frame rate, a wrong order);
+* **lateral error** ``lateral_mm``: the residual (or the noise, whichever is larger) at each joint's depth
+  (``px * depth / f``), millimetres;
+* **geometry** ``geometry_mm``: the depth error the noise alone leaves, given the angle between a joint's ray
+  and the rays of the same joint in the images nearest in the recovered order from other cameras
+  (``noise_mm / sin(angle)``): a reconstruction can reproject perfectly yet be wrong in depth where no
+  other camera looks at the same moment;
+* **roughness** ``roughness_mm``: the second difference of the 3-D joints along the recovered order
+  (what the motion plus the errors leave between neighbouring images).
+
+:data:`CALIBRATION` maps their logarithms to the logarithm of the MPJPE (a small least-squares fit, see
+its comment for the command that produced it). The per-joint uncertainty spreads the predicted error over
+the joints in proportion to each joint's own lateral and depth terms. Ground truth never reaches this
+module: it takes only :class:`~gttdata.capture.views.Observations` and a reconstruction.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from gttnet.geometry.noise import stream_noise_px
+
+if TYPE_CHECKING:
+    from gttdata.capture.views import Observations
+    from gttnet.methods import Reconstruction
+
+__all__ = ["CALIBRATION", "FEATURES", "assess", "features", "joint_uncertainty_mm", "predict_mm"]
+
+#: The evidence of the log-linear part, in the order of :data:`CALIBRATION`'s slopes (each enters as its
+#: natural logarithm): the noise at the joints' depth, the held-out error and the roughness over it.
+FEATURES = ("noise_mm", "holdout_ratio", "roughness_ratio")
+#: Further scalars of :func:`features` reported with the prediction (``excess_mm`` and ``blind_mm`` enter
+#: :func:`predict_mm` as their own terms).
+EXTRAS = (
+    "sigma_px",
+    "residual_px",
+    "excess",
+    "excess_mm",
+    "lateral_mm",
+    "geometry_mm",
+    "roughness_mm",
+    "holdout_mm",
+    "blind_fraction",
+    "blind_mm",
+)
+#: Added to ``roughness_mm / noise_mm`` before the logarithm (smooth trajectories reach 0).
+ROUGHNESS_FLOOR = 0.05
+
+#: ``log(base_mm) = intercept + sum(slope_i * log(feature_i))`` over :data:`FEATURES`; the prediction is
+#: ``hypot(base_mm, excess_factor * excess_mm)`` (see :func:`predict_mm`). Intercept and slopes fitted by
+#: ``python benchmarks/bench_auto.py --fit runs/bench_auto/fit.jsonl`` on the rows of ``python
+#: benchmarks/bench_auto.py --recipes recipes/gttdata/paper.yaml,recipes/gttdata/default.yaml,``
+#: ``recipes/gttdata/hands.yaml,recipes/gttdata/topologies.yaml --split val --n-seq 5 --no-auto --rows
+#: runs/bench_auto/fit.jsonl`` (217 reconstructions of 20 captures, every candidate method under every
+#: sequencing condition: log residual std 0.223, 98.2 % within [0.5x, 2x]). ``excess_factor`` and
+#: ``interval_factor`` (the per-point bound's multiple of the spread MPJPE, for an 80 % rate) were chosen on
+#: the ``val`` half of the out-of-distribution cells (``recipes/gttdata/ood/``); docs/METHOD.md has the
+#: calibration measured on their ``test`` half.
+CALIBRATION: dict[str, Any] = {
+    "intercept": 0.0417,
+    "slopes": [1.0793, 0.5955, 0.2946],
+    "excess_factor": 2.0,
+    "interval_factor": 1.35,
+    "interval_rate": 0.8,
+}
+
+#: Images on each side of an image, in the recovered order, whose rays count for its joints' geometry.
+NEIGHBOURS = 4
+#: The smallest ray angle's sine counted (a joint no other camera sees nearby gets this: ~3 degrees).
+MIN_SIN = 0.05
+#: The residual of a 2-D Gaussian's radius at its median, in units of the per-axis std: sqrt(2 ln 2).
+_RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))
+
+
+def _recovered_rank(obs: Observations, rec: Reconstruction) -> np.ndarray | None:
+    """Each image's rank in time: the method's recovered order, else the timestamps, else None."""
+    if rec.order is not None:
+        return np.asarray(rec.order)
+    if obs.timestamp_s is not None:
+        return np.argsort(np.argsort(np.asarray(obs.timestamp_s), kind="stable"), kind="stable")
+    return None
+
+
+def _stream_index(obs: Observations, rank: np.ndarray | None) -> np.ndarray | None:
+    """Each image's frame index within its camera: given, else the recovered rank within the camera."""
+    if obs.stream_index is not None:
+        return np.asarray(obs.stream_index)
+    if rank is None:
+        return None
+    si = np.zeros(obs.n_images, dtype=np.int64)
+    for c in np.unique(obs.cam_id):
+        idx = np.flatnonzero(obs.cam_id == c)
+        si[idx[np.argsort(rank[idx], kind="stable")]] = np.arange(idx.size)
+    return si
+
+
+def _reprojection(obs: Observations, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residual (px), depth (m) and mm-per-px of every (image, joint), each shape ``(N, J)``; NaN where unused."""
+    T = np.asarray(obs.cam_from_world, dtype=np.float64)
+    Xc = np.einsum("nab,njb->nja", T[:, :3, :3], X) + T[:, None, :3, 3]
+    z = Xc[..., 2]
+    K = np.asarray(obs.K, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uv = np.einsum("nab,njb->nja", K[:, :2, :3], Xc) / z[..., None]
+    ok = np.asarray(obs.visible, dtype=bool) & np.isfinite(uv).all(axis=-1) & (z > 0)
+    kp = np.asarray(obs.keypoints_px, dtype=np.float64)
+    r = np.where(ok, np.linalg.norm(np.where(ok[..., None], uv - kp, 0.0), axis=-1), np.nan)
+    f = 0.5 * (K[:, 0, 0] + K[:, 1, 1])
+    mm_per_px = np.where(ok, 1000.0 * z / f[:, None], np.nan)
+    return r, np.where(ok, z, np.nan), mm_per_px
+
+
+def _best_sine(obs: Observations, rank: np.ndarray | None) -> np.ndarray:
+    """Largest sine of the angle between each joint's ray and the same joint's ray in a neighbouring image.
+
+    Neighbours are the :data:`NEIGHBOURS` images on each side in the recovered order taken by other
+    cameras; shape ``(N, J)``, :data:`MIN_SIN` where none sees the joint (or no order was recovered).
+    """
+    n, j = obs.visible.shape
+    best = np.full((n, j), MIN_SIN)
+    if rank is None or n < 2:
+        return best
+    d = obs.rays()
+    vis = np.asarray(obs.visible, dtype=bool)
+    seq = np.argsort(rank, kind="stable")
+    cam = np.asarray(obs.cam_id)[seq]
+    for off in range(1, NEIGHBOURS + 1):
+        a, b = seq[:-off], seq[off:]
+        other = (cam[:-off] != cam[off:])[:, None] & vis[a] & vis[b]
+        s = np.linalg.norm(np.cross(d[a], d[b]), axis=-1)
+        s = np.where(other, s, 0.0)
+        best[a] = np.maximum(best[a], s)
+        best[b] = np.maximum(best[b], s)
+    return best
+
+
+def _holdout(obs: Observations, X: np.ndarray, rank: np.ndarray | None, s: np.ndarray) -> np.ndarray:
+    """Held-out prediction error of every (image, joint), millimetres at the joint's depth, shape ``(N, J)``.
+
+    Each image is left out and predicted from the nearest images of other cameras before and after it in
+    the recovered order (linear in rank); the prediction is reprojected into the left-out image. A point
+    wrong in depth along its own ray reprojects perfectly in its own image but lands off the ray seen from
+    another camera, so this measures what the own-image residual cannot. NaN where no prediction exists.
+    """
+    n = obs.n_images
+    out = np.full(obs.visible.shape, np.nan)
+    if rank is None or n < 3:
+        return out
+    seq = np.argsort(rank, kind="stable")
+    cam = np.asarray(obs.cam_id)[seq]
+    pos = np.arange(n)
+    prev = np.full(n, -1)
+    nxt = np.full(n, -1)
+    for c in np.unique(cam):  # nearest position of a camera other than c before / after each position
+        other = np.flatnonzero(cam != c)
+        if other.size == 0:
+            continue
+        mine = pos[cam == c]
+        k = np.searchsorted(other, mine)
+        prev[mine] = np.where(k > 0, other[np.maximum(k - 1, 0)], -1)
+        nxt[mine] = np.where(k < other.size, other[np.minimum(k, other.size - 1)], -1)
+    ok = (prev >= 0) & (nxt >= 0)
+    if not ok.any():
+        return out
+    p, a, b = pos[ok], prev[ok], nxt[ok]
+    w = ((p - a) / (b - a))[:, None, None]
+    Xh = np.full(X.shape, np.nan)
+    Xh[seq[p]] = (1.0 - w) * X[seq[a]] + w * X[seq[b]]
+    r, _z, _s = _reprojection(obs, Xh)
+    return r * s / _RAYLEIGH_MEDIAN
+
+
+def _blind_rows(obs: Observations) -> np.ndarray:
+    """Images with no observed joint, shape ``(N,)`` bool: only their neighbours in time can place them.
+
+    Under ``partial``, an image of a camera that observes joints in at least three images is placed by
+    its neighbours in the stream and does not count; a camera with fewer (a blind camera) does.
+    """
+    blind = np.asarray(~np.asarray(obs.visible, dtype=bool).any(axis=1), dtype=bool)
+    if obs.sequencing == "partial" and blind.any():
+        cam = np.asarray(obs.cam_id)
+        seen = {int(c): int((~blind[cam == c]).sum()) for c in np.unique(cam)}
+        blind = blind & np.array([seen[int(c)] < 3 for c in cam])
+    return blind
+
+
+def _blind(obs: Observations, X: np.ndarray) -> tuple[float, float]:
+    """Fraction of the images without observations (:func:`_blind_rows`) and their expected error, mm.
+
+    Nothing observed places their joints. With timestamps (``full``) the error is the distance of the
+    method's points there from the interpolation, in time, of the nearest observed images before and after
+    (a method that ignores the timestamps leaves them anywhere). Without, where such an image truly is
+    within the motion is unknown: the RMS distance of its points from each joint's mean over the observed
+    images, in quadrature with that joint's spread over time.
+    """
+    blind = _blind_rows(obs)
+    if not blind.any() or blind.all():
+        return 0.0, 0.0
+    with np.errstate(invalid="ignore"):
+        if obs.sequencing == "full" and obs.timestamp_s is not None:
+            t = np.asarray(obs.timestamp_s, dtype=np.float64)
+            seen_idx = np.flatnonzero(~blind)
+            seen_idx = seen_idx[np.argsort(t[seen_idx], kind="stable")]
+            ts = t[seen_idx]
+            tb = t[blind]
+            k = np.clip(np.searchsorted(ts, tb), 1, ts.size - 1)
+            a, b = seen_idx[k - 1], seen_idx[k]
+            w = np.clip((tb - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None, None]
+            ref = (1.0 - w) * X[a] + w * X[b]
+            e = np.linalg.norm(X[blind] - ref, axis=-1)
+        else:
+            seen = X[~blind]
+            mean = np.nanmean(seen, axis=0)
+            spread2 = np.nanmean(np.sum((seen - mean) ** 2, axis=-1), axis=0)
+            d2 = np.sum((X[blind] - mean) ** 2, axis=-1)
+            e = np.sqrt(d2 + spread2[None, :])
+    return float(blind.mean()), 1000.0 * float(np.nanmean(e)) if np.isfinite(e).any() else 0.0
+
+
+def _nanmedian(a: np.ndarray) -> float:
+    v = np.asarray(a, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(np.median(v)) if v.size else float("nan")
+
+
+def features(obs: Observations, rec: Reconstruction) -> dict[str, Any]:
+    """The evidence of :data:`FEATURES` for one reconstruction, plus per-joint terms.
+
+    Args:
+        obs: The observations the reconstruction was made from (the same image order).
+        rec: The reconstruction, ``points3d`` of shape ``(N, J, 3)`` in metres.
+
+    Returns:
+        Scalars ``sigma_px``, ``residual_px`` and the :data:`FEATURES` (millimetres, ``excess`` a ratio),
+        and ``per_joint_mm`` (shape ``(J,)``) / ``per_point_mm`` (shape ``(N, J)``): each joint's
+        quadrature of its lateral and depth terms (relative weights; NaN where not reconstructed).
+    """
+    X = np.asarray(rec.points3d, dtype=np.float64)
+    rank = _recovered_rank(obs, rec)
+    r, _z, s = _reprojection(obs, X)
+    si = _stream_index(obs, rank)
+    sigma = None
+    if si is not None:
+        sigma = stream_noise_px(obs.keypoints_px, obs.visible, obs.cam_id, si)
+    residual = _nanmedian(r) / _RAYLEIGH_MEDIAN
+    if sigma is None or not math.isfinite(sigma):
+        sigma_eff = residual if math.isfinite(residual) else 1.0
+    else:
+        sigma_eff = sigma
+    sigma_eff = max(sigma_eff, 0.1)
+    sine = _best_sine(obs, rank)
+    lateral_pt = np.maximum(np.nan_to_num(r, nan=0.0) / _RAYLEIGH_MEDIAN, sigma_eff) * s
+    depth_pt = sigma_eff * s / sine
+    point = np.sqrt(lateral_pt**2 + depth_pt**2)
+    finite = np.isfinite(X).all(axis=-1)
+    point = np.where(finite, point, np.nan)
+    with np.errstate(invalid="ignore"):
+        per_joint = np.array([_nanmedian(point[:, k]) for k in range(point.shape[1])])
+        per_point = point.copy()
+    # images that do not see a joint: the joint's median over the images that do
+    per_point = np.where(np.isfinite(per_point), per_point, per_joint[None, :])
+    per_point = np.where(finite, per_point, np.nan)
+    rough = float("nan")
+    if rank is not None and obs.n_images >= 3:
+        seq = np.argsort(rank, kind="stable")
+        d2 = X[seq[:-2]] - 2.0 * X[seq[1:-1]] + X[seq[2:]]
+        rough = 1000.0 * _nanmedian(np.linalg.norm(d2, axis=-1))
+    mm = _nanmedian(s)
+    hold = _holdout(obs, X, rank, s)
+    blind_frac, blind_mm = _blind(obs, X)
+    out = {
+        "sigma_px": None if sigma is None else float(sigma),
+        "residual_px": float(residual),
+        "noise_mm": float(sigma_eff * mm),
+        "lateral_mm": _nanmedian(lateral_pt),
+        "geometry_mm": _nanmedian(depth_pt),
+        "roughness_mm": rough,
+        "excess": float(max(residual / sigma_eff, 1.0)) if math.isfinite(residual) else float("nan"),
+        "excess_mm": float(math.sqrt(max(residual**2 - sigma_eff**2, 0.0)) * mm)
+        if math.isfinite(residual)
+        else 0.0,
+        "holdout_mm": _nanmedian(hold),
+        "holdout_ratio": _nanmedian(hold) / float(sigma_eff * mm),
+        "roughness_ratio": rough / float(sigma_eff * mm) + ROUGHNESS_FLOOR,
+        "blind_fraction": blind_frac,
+        "blind_mm": blind_mm,
+        "blind_rows": _blind_rows(obs),
+        "per_joint_mm": per_joint,
+        "per_point_mm": per_point,
+    }
+    return out
+
+
+def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None) -> float:
+    """The calibrated MPJPE prediction, millimetres, from :func:`features`' scalars (NaN features count as 1).
+
+    The log-linear model covers the images with observations, in quadrature with ``excess_factor`` times
+    the residual beyond the noise (``excess_mm``: what the structure fails to explain, at the joints'
+    depth); untimed images without any observation (a blind camera) count with their own term, weighted
+    by their share of the images.
+    """
+    cal = CALIBRATION if calibration is None else calibration
+    logv = 0.0 + float(cal["intercept"])
+    for name, slope in zip(FEATURES, cal["slopes"], strict=True):
+        v = feats.get(name)
+        v = 1.0 if v is None or not math.isfinite(float(v)) or float(v) <= 0 else float(v)
+        logv += float(slope) * math.log(max(v, 1e-3))
+    seen = math.hypot(math.exp(logv), float(cal["excess_factor"]) * float(feats.get("excess_mm") or 0.0))
+    b = float(feats.get("blind_fraction") or 0.0)
+    return float((1.0 - b) * seen + b * float(feats.get("blind_mm") or 0.0))
+
+
+def joint_uncertainty_mm(
+    feats: dict[str, Any], expected_mm: float, calibration: dict | None = None
+) -> np.ndarray:
+    """Per-point uncertainty, millimetres, shape ``(N, J)``, NaN where the joint is not reconstructed.
+
+    The bound each point's 3-D error should stay below at :data:`CALIBRATION`'s ``interval_rate``.
+
+    The predicted MPJPE is spread over the points in proportion to each point's own lateral and depth
+    terms, then scaled by the calibrated interval factor.
+    """
+    cal = CALIBRATION if calibration is None else calibration
+    p = np.asarray(feats["per_point_mm"], dtype=np.float64).copy()
+    blind = np.asarray(feats.get("blind_rows", np.zeros(p.shape[0], bool)), dtype=bool)
+    seen = p[~blind]
+    m = float(np.nanmean(seen)) if np.isfinite(seen).any() else float("nan")
+    if not math.isfinite(m) or m <= 0:
+        return np.full(p.shape, np.nan)
+    b = float(feats.get("blind_fraction") or 0.0)
+    observed_mm = (expected_mm - b * float(feats.get("blind_mm") or 0.0)) / max(1.0 - b, 1e-9)
+    out = p * max(observed_mm, 0.0) / m
+    out[blind] = np.where(np.isfinite(p[blind]), float(feats.get("blind_mm") or 0.0), np.nan)
+    return float(cal["interval_factor"]) * out
+
+
+def _reasons(f: dict[str, Any], expected: float) -> list[str]:
+    """Plain-language reasons for the prediction (the terms that dominate it)."""
+    out = []
+    if f["sigma_px"] is None:
+        out.append("the 2-D noise could not be measured (streams too short or no order): residual used")
+    if f["excess"] > 2.0:
+        out.append(
+            f"the reconstruction reprojects {f['residual_px']:.1f} px from the images, {f['excess']:.1f}x the "
+            "capture's noise: the structure does not explain the images (wrong clocks, rate or order?)"
+        )
+    if f["geometry_mm"] > 3.0 * f["noise_mm"]:
+        out.append(
+            f"weak triangulation: joints are rarely seen by another camera at nearby moments "
+            f"(depth term {f['geometry_mm']:.0f} mm against {f['noise_mm']:.1f} mm lateral noise)"
+        )
+    if not out:
+        out.append("residual at the noise floor and good triangulation angles")
+    return out
+
+
+def assess(obs: Observations, rec: Reconstruction) -> tuple[dict[str, Any], np.ndarray]:
+    """Self-assessment of ``rec``: the ``quality`` summary and the per-point uncertainty.
+
+    Args:
+        obs: The observations the reconstruction was made from.
+        rec: The reconstruction.
+
+    Returns:
+        ``(quality, uncertainty)``: ``quality`` is JSON-serialisable with ``expected_error_mm`` (predicted
+        MPJPE, mm), ``reasons`` (list of strings) and the evidence (``sigma_px``, ``residual_px``,
+        ``noise_mm``, ``lateral_mm``, ``geometry_mm``, ``roughness_mm``, ``excess``);
+        ``uncertainty`` has shape ``(N, J)``, millimetres (:func:`joint_uncertainty_mm`).
+    """
+    f = features(obs, rec)
+    expected = predict_mm(f)
+    unc = joint_uncertainty_mm(f, expected)
+    q: dict[str, Any] = {"expected_error_mm": round(expected, 3), "reasons": _reasons(f, expected)}
+    for k in (*EXTRAS, *FEATURES):
+        v = f[k]
+        q[k] = None if v is None or not math.isfinite(float(v)) else round(float(v), 4)
+    q["interval_rate"] = float(CALIBRATION["interval_rate"])
+    return q, unc
