@@ -209,18 +209,22 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
         Up to ``n_subjects`` recordings.
 
     Raises:
-        ValueError: Fewer people than ``n_subjects`` are seen by two or more cameras.
+        KeypointFormatError: Fewer people than ``n_subjects`` are seen by two or more cameras.
     """
     from gttdata.detectors.openpose import read_openpose_people
     from gttnet.association import CameraPeople, associate
 
     crowds = []
-    for cam, kp in zip(spec.cameras, recording.keypoints, strict=True):
-        people = read_openpose_people(cam.keypoints) if kp.fmt == "openpose" else None
-        crowds.append(people)
+    reader_log = logging.getLogger("gttdata.detectors.openpose")
+    was, reader_log.disabled = reader_log.disabled, True  # its stray-file warnings were given on loading
+    try:
+        for kp in recording.keypoints:
+            crowds.append(read_openpose_people(Path(kp.source)) if kp.fmt == "openpose" else None)
+    finally:
+        reader_log.disabled = was
     if all(c is None for c in crowds):
         if n_subjects > 1:
-            raise ValueError(
+            raise KeypointFormatError(
                 f"{spec.calibration}: --subjects {n_subjects}: every camera's keypoints hold one person per frame"
             )
         return [recording]
@@ -231,7 +235,7 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
     fps = [float(f) if np.isfinite(f) else 30.0 for f in recording.fps]
     subjects = associate(tables, list(recording.rig.cameras), fps, n_subjects=n_subjects)
     if len(subjects) < n_subjects:
-        raise ValueError(
+        raise KeypointFormatError(
             f"{spec.calibration}: --subjects {n_subjects}: found {len(subjects)} people seen by two or more cameras"
         )
     log.info(
