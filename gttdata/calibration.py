@@ -381,7 +381,9 @@ def _fixed_unit_reader(path: Path) -> Callable[[Path], tuple[CameraRig, str]] | 
         return cf.read_qca
     if name.endswith(".xcp"):
         return cf.read_xcp
-    if name.endswith((".pickle", ".pkl", ".mcal")):
+    if name.endswith((".pickle", ".pkl")):
+        return cf.read_opencap
+    if name.endswith(".mcal"):
         return cf.refuse_unreadable  # type: ignore[return-value]
     if name.endswith(".toml") and path.is_file():
         try:

@@ -25,13 +25,17 @@ unit the file was written in. The unit comes from the format, never from a guess
   in millimetres (``metadata.charuco_square_size``), so its translations are **millimetres**.
 * **EasyMocap** ``intri.yml``/``extri.yml`` and **anipose / Pose2Sim** TOML: :mod:`gttdata.calibration`.
 
-OpenCap's calibrations are Python pickles and OptiTrack's are entered by hand in Pose2Sim; neither is read
-(a pickle is code, never loaded): :func:`refuse_unreadable` says so in one line.
+OpenCap's calibrations are pickles of numpy arrays: :func:`read_opencap` reads them with an unpickler that
+builds arrays and builtin data only (any other global is refused before it runs). OptiTrack's are typed
+in by hand in Pose2Sim (it converts none): :func:`refuse_unreadable` says so in one line.
 """
 
 from __future__ import annotations
 
+import importlib
+import io
 import os
+import pickle
 import re
 import tomllib
 import xml.etree.ElementTree as ET
@@ -268,19 +272,119 @@ def read_caliscope(path: str | Path) -> tuple[CameraRig, str]:
     return CameraRig(tuple(cams)), "m"
 
 
+#: The only globals an OpenCap calibration pickle may name: numpy's array and dtype constructors (data only).
+_NUMPY_DATA = {
+    (mod, name)
+    for mod in (
+        "numpy.core.multiarray",
+        "numpy._core.multiarray",
+        "numpy.core.numeric",
+        "numpy._core.numeric",
+        "numpy",
+    )
+    for name in ("_reconstruct", "scalar", "_frombuffer", "ndarray", "dtype")
+} | {("_codecs", "encode")}  # protocol 2 writes an array's bytes as a latin-1 string encoded back to bytes
+
+
+class _ArraysOnly(pickle.Unpickler):
+    """An unpickler that builds builtin data and numpy arrays, and resolves no other global."""
+
+    def find_class(self, module: str, name: str):  # noqa: D102 - pickle's hook
+        if (module, name) not in _NUMPY_DATA:
+            raise pickle.UnpicklingError(f"global {module}.{name}")
+        return getattr(importlib.import_module(module), name)
+
+    def persistent_load(self, pid):  # noqa: D102 - pickle's hook
+        raise pickle.UnpicklingError("persistent id")
+
+
+def _opencap_dict(path: Path) -> dict:
+    try:
+        data = _ArraysOnly(io.BytesIO(path.read_bytes())).load()
+    except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError) as exc:
+        raise CalibrationError(
+            f"{path}: expected an OpenCap calibration pickle of numpy arrays, found {exc} "
+            "(nothing in it was run: only numpy arrays and builtin data are read)"
+        ) from None
+    if not isinstance(data, dict):
+        raise CalibrationError(f"{path}: expected a dict of arrays, found {type(data).__name__}")
+    return data
+
+
+def _opencap_array(path: Path, d: dict, key: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    if key not in d:
+        raise CalibrationError(f"{path}: field '{key}': expected an array, found no such key")
+    try:
+        a = np.asarray(d[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(
+            f"{path}: field '{key}': expected numbers, found {type(d[key]).__name__}"
+        ) from None
+    if shape is not None and a.size != int(np.prod(shape)):
+        raise CalibrationError(
+            f"{path}: field '{key}': expected {int(np.prod(shape))} numbers, found shape {a.shape}"
+        )
+    if not np.all(np.isfinite(a)):
+        raise CalibrationError(f"{path}: field '{key}': expected finite numbers, found NaN or inf")
+    return a if shape is None else a.reshape(shape)
+
+
+def _opencap_files(path: Path) -> list[tuple[str, Path]]:
+    """The session's camera pickles: siblings of ``path`` (named by file), or ``../*/<its name>`` (by folder)."""
+    sib = sorted(
+        (p for p in path.parent.iterdir() if p.suffix.lower() in (".pickle", ".pkl")),
+        key=lambda p: _natural_key(p.name),
+    )
+    if len(sib) > 1:
+        return [(p.stem, p) for p in sib]
+    per_folder = sorted(path.parent.parent.glob(f"*/{path.name}"), key=lambda p: _natural_key(p.parent.name))
+    return [(p.parent.name, p) for p in per_folder] or [(path.stem, path)]
+
+
+def read_opencap(path: str | Path) -> tuple[CameraRig, str]:
+    """Read OpenCap's per-camera calibration pickles (``cameraIntrinsicsExtrinsics.pickle``) as one rig.
+
+    ``path`` is one camera's pickle; the rig is every pickle beside it (cameras named by file), or, in
+    OpenCap's own layout (``Videos/Cam0/cameraIntrinsicsExtrinsics.pickle``, ``Cam1/...``), the file of the
+    same name in each sibling folder (cameras named by folder). Each pickle is a dict of numpy arrays:
+    ``intrinsicMat`` (3 x 3, pixels), ``distortion`` (k1, k2, p1, p2, k3; the first four are kept),
+    ``imageSize`` (height, width), ``rotation`` (3 x 3) and ``translation`` (3, millimetres): OpenCV's
+    ``cam_from_world`` in a world frame set by a vertical calibration board (y down the board, z out of
+    it). The world is turned to ours (z up: ``X_ours = Rz(pi) Rx(-pi/2) X_board``), as Pose2Sim's
+    conversion does. The file is read by an unpickler that builds numpy arrays and builtin data only:
+    any other global (a function, a class) is refused before anything runs.
+
+    Returns:
+        ``(rig in metres, "mm")``: the unit the format fixes.
+
+    Raises:
+        CalibrationError: A pickle that names another global, is damaged, or lacks a field (one line).
+    """
+    path = Path(path)
+    Rw = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]) @ np.array(
+        [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]
+    )  # Rz(pi) @ Rx(-pi/2): board frame -> ours
+    cams = []
+    for name, f in _opencap_files(path):
+        d = _opencap_dict(f)
+        K = _opencap_array(f, d, "intrinsicMat", (3, 3))
+        dist = _opencap_array(f, d, "distortion").ravel()
+        h, w = _opencap_array(f, d, "imageSize").ravel()[:2]
+        R = _opencap_array(f, d, "rotation", (3, 3))
+        t = _opencap_array(f, d, "translation").ravel()
+        if t.size != 3 or dist.size < 4:
+            raise CalibrationError(f"{f}: fields 'translation'/'distortion': expected 3 and >= 4 numbers")
+        cams.append(_camera(f, name, K, R @ Rw.T, t / 1000.0, (int(round(w)), int(round(h))), dist[:4]))
+    return CameraRig(tuple(cams)), "mm"
+
+
 def refuse_unreadable(path: str | Path) -> None:
-    """Raise one line for calibration files that are never read: OpenCap pickles (code), OptiTrack.
+    """Raise one line for calibration files that are never read: OptiTrack's (Pose2Sim has them typed in).
 
     Raises:
         CalibrationError: Always, naming the file and what to do instead.
     """
     path = Path(path)
-    if path.suffix.lower() in (".pickle", ".pkl"):
-        raise CalibrationError(
-            f"{path}: OpenCap calibrations are Python pickles, which are never loaded (a pickle runs code); "
-            "convert it to a Pose2Sim/aniposelib .toml in a trusted environment (Pose2Sim's calibration "
-            "step does) and pass that"
-        )
     raise CalibrationError(
         f"{path}: OptiTrack calibrations are not read; enter the values in a Pose2Sim/aniposelib .toml "
         "as Pose2Sim's documentation describes"

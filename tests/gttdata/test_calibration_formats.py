@@ -146,16 +146,66 @@ class _Bomb:
         return (open, ("/tmp/gtt_opencap_pickle_ran", "w"))
 
 
-def test_opencap_pickle_is_never_loaded(tmp_path):
+def test_opencap_pickle_that_calls_anything_runs_nothing(tmp_path):
     import os
 
     marker = "/tmp/gtt_opencap_pickle_ran"
     if os.path.exists(marker):
         os.remove(marker)
     (tmp_path / "cam0.pickle").write_bytes(pickle.dumps(_Bomb()))
-    with pytest.raises(CalibrationError, match="never loaded"):
+    with pytest.raises(CalibrationError, match="nothing in it was run") as exc:
         load_calibration(tmp_path / "cam0.pickle")
-    assert not os.path.exists(marker)
+    assert not os.path.exists(marker) and "\n" not in str(exc.value)
+    # A global that is not one of numpy's array constructors is refused too (here a harmless one).
+    import collections
+
+    (tmp_path / "cam0.pickle").write_bytes(pickle.dumps(collections.OrderedDict(a=1)))
+    with pytest.raises(CalibrationError, match="global collections.OrderedDict"):
+        load_calibration(tmp_path / "cam0.pickle")
+
+
+def _opencap(folder, name, *, centre_board, protocol=pickle.DEFAULT_PROTOCOL):
+    """An OpenCap pickle of a camera at ``centre_board`` (board frame, metres) looking at the board origin."""
+    c = np.asarray(centre_board, dtype=np.float64)
+    z = -c / np.linalg.norm(c)
+    x = np.cross(np.array([0.0, -1.0, 0.0]), z)  # board frame: y points down the board
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(z, x), z])
+    d = {
+        "intrinsicMat": np.array([[1400.0, 0, 960], [0, 1400.0, 540], [0, 0, 1]]),
+        "distortion": np.array([[0.01, -0.02, 0.001, 0.002, 0.0]]),
+        "imageSize": np.array([[1080], [1920]]),
+        "rotation": R,
+        "translation": (-R @ c * 1000.0).reshape(3, 1),
+    }
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_bytes(pickle.dumps(d, protocol=protocol))
+
+
+@pytest.mark.parametrize("protocol", [2, 4, 5])
+def test_opencap_session_reads_as_one_rig_in_our_world(tmp_path, protocol):
+    """OpenCap's layout (Videos/CamN/cameraIntrinsicsExtrinsics.pickle), board frame turned to z up."""
+    name = "cameraIntrinsicsExtrinsics.pickle"
+    _opencap(tmp_path / "Cam0", name, centre_board=[0.0, -1.5, 3.0], protocol=protocol)  # 1.5 m up, 3 m out
+    _opencap(tmp_path / "Cam1", name, centre_board=[2.0, -1.0, 2.0], protocol=protocol)
+    rig, units = load_calibration(tmp_path / "Cam0" / name, warn=False)
+    assert units == "mm" and [c.name for c in rig.cameras] == ["Cam0", "Cam1"]
+    cam = rig.cameras[0]
+    np.testing.assert_allclose(cam.center, [0.0, -3.0, 1.5], atol=1e-9)  # height is +z in our world
+    np.testing.assert_allclose(rig.cameras[1].center, [-2.0, -2.0, 1.0], atol=1e-9)
+    assert cam.image_size == (1920, 1080) and cam.K[0, 0] == 1400.0
+    np.testing.assert_allclose(cam.dist[:4], [0.01, -0.02, 0.001, 0.002])
+    px, depth = cam.project(np.zeros((1, 3)))  # the board origin is where it looked
+    np.testing.assert_allclose(px[0], [960.0, 540.0], atol=1e-6)
+    assert depth[0] > 0
+
+
+def test_opencap_missing_field_names_it(tmp_path):
+    import pickle as pk
+
+    (tmp_path / "c.pickle").write_bytes(pk.dumps({"intrinsicMat": np.eye(3)}))
+    with pytest.raises(CalibrationError, match=r"c\.pickle: field 'distortion'"):
+        load_calibration(tmp_path / "c.pickle")
 
 
 def test_qca_errors_name_file_and_field(tmp_path):
