@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 from pathlib import Path
@@ -18,31 +17,6 @@ from gttnet.cli._options import INPUT_FORMATS, STORED_SAMPLE_HELP, STORED_SPLIT_
 __all__ = ["register", "reconstruct_cmd"]
 
 log = logging.getLogger(__name__)
-
-
-def _method_fields(rec, camera_names=None) -> dict:
-    """The method fields of a reconstruction's report.
-
-    ``method`` = the method that ran (``auto`` names its choice, ``requested_method`` keeps "auto"),
-    ``nan_joints`` (indices of the joints left NaN: never observed, or too few rays for the method),
-    ``refined`` (GTT-Net: whether a DLOE round followed the network) and,
-    after clock recovery, ``clock_offsets_s`` ({camera: s}). Where joints are NaN, ``mpjpe_mm`` is over
-    the others.
-    """
-    out: dict[str, Any] = {"method": rec.info.get("method_ran", rec.method)}
-    if out["method"] != rec.method:
-        out["requested_method"] = rec.method
-    if rec.nan_joints.size:
-        out["nan_joints"] = rec.nan_joints.tolist()
-    if "refined" in rec.info:
-        out["refined"] = bool(rec.info["refined"])
-    if "clock_offsets_s" in rec.info:
-        names = list(camera_names or [])
-        out["clock_offsets_s"] = {
-            (names[int(k)] if str(k).isdigit() and int(k) < len(names) else str(k)): round(float(v), 6)
-            for k, v in rec.info["clock_offsets_s"].items()
-        }
-    return out
 
 
 class MethodChoice(click.Choice):
@@ -77,39 +51,6 @@ class MethodChoice(click.Choice):
         return super().convert(value, param, ctx)
 
 
-def _mpjpe_reconstructed(rec, gt_points) -> float:
-    """MPJPE (mm) over the joints the method reconstructed: the joints it left NaN are not scored."""
-    import numpy as np
-
-    from gttnet.evaluate.metrics import mpjpe_mm
-
-    keep = np.setdiff1d(np.arange(rec.n_joints), rec.nan_joints)
-    return mpjpe_mm(rec.points3d[:, keep], gt_points[:, keep]) if keep.size else float("nan")
-
-
-def _report(loaded, rec) -> dict:
-    import numpy as np
-
-    from gttnet.evaluate.metrics import kendall_tau
-
-    out = {
-        "method": rec.method,
-        "sequencing": rec.sequencing,
-        "n_images": rec.n_images,
-        "n_joints": rec.n_joints,
-        "seconds": round(float(rec.seconds), 4),
-    }
-    if "windows" in rec.info:
-        out["windows"] = rec.info["windows"]
-    out.update(_method_fields(rec))
-    gt = loaded.ground_truth
-    if gt is not None:
-        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt.points3d), 4)
-        if rec.order is not None and np.all(gt.global_order >= 0):
-            out["order_kendall_tau"] = round(kendall_tau(rec.order, gt.global_order), 4)
-    return out
-
-
 def _window_arg(value: str) -> int | str | None:
     """``--window``: ``"auto"``, None for ``off``, or an image count >= 2."""
     if value in ("auto", "off"):
@@ -132,54 +73,6 @@ def _method_default() -> str:
 
 
 _WarningLines = WarningLines  # the name gttnet render and sync import
-
-
-class _Held(logging.Handler):
-    """Collect log messages (the clock code's warnings, printed later by camera name)."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.lines: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.lines.append(record.getMessage())
-
-
-@contextlib.contextmanager
-def _time_warnings_held():
-    """Hold back the clock code's warning log lines; yields the list they are collected in."""
-    sync_log = logging.getLogger("gttnet.sync")
-    held = _Held()
-    sync_log.addHandler(held)
-    try:
-        yield held.lines
-    finally:
-        sync_log.removeHandler(held)
-
-
-def _timing_fields(rec, view, *, quiet: bool, held: list[str]) -> dict:
-    """Print clock recovery's timing warnings by camera name; return the summary's timing fields.
-
-    Where the reconstruction's ``info`` has no timing checks (windows: one recovery per window), the held
-    log lines are printed once each, cameras by index. The fields, where clocks were recovered:
-    ``frame_rates_hz`` ({name: Hz}) and ``cameras_left_out`` ({name: reason}).
-    """
-    from gttnet.sync.rates import time_warnings
-
-    names = dict(enumerate(view.camera_names))
-    lines = time_warnings(rec.info, names) if "time_warnings" in rec.info else list(dict.fromkeys(held))
-    if not quiet:
-        for line in lines:
-            click.echo(f"warning: {line}", err=True)
-    out: dict = {}
-    rates = (rec.info.get("frame_rates") or {}).get("cameras")
-    if rates:
-        out["frame_rates_hz"] = {names.get(int(c), c): round(r["used_hz"], 4) for c, r in rates.items()}
-    if rec.info.get("cameras_left_out"):
-        out["cameras_left_out"] = {
-            names.get(int(c), c): why for c, why in rec.info["cameras_left_out"].items()
-        }
-    return out
 
 
 def _check_outs(out_paths, overwrite: bool) -> None:
@@ -560,6 +453,7 @@ def reconstruct_cmd(
         sequencing_given=sequencing is not None,
     )
     inp = _resolve_input(input_paths, weights, **resolve)
+    echo = lambda line: click.echo(line, err=True)  # noqa: E731
     if subjects > 1 and inp["loaded"] is None:
         # A recording with several people: one reconstruction per person (stable ids by cross-view
         # support), each written to its own files (result_p0.trc, result_p1.trc, ...).
@@ -568,13 +462,11 @@ def reconstruct_cmd(
             inp_k = _resolve_input(input_paths, weights, **resolve, subject=k, n_subjects=subjects)
             outs = [str(Path(o).with_name(f"{Path(o).stem}_p{k}{Path(o).suffix}")) for o in out_paths]
             export = None if export_keypoints is None else f"{export_keypoints}_p{k}"
-            summary = _solve_and_write(
-                inp_k, {**run, "subjects": 1, "export_keypoints": export}, spec_m, outs
-            )
+            summary = _solve(inp_k, {**run, "subjects": 1, "export_keypoints": export}, spec_m, outs, echo)
             summaries.append({"subject": k, **summary})
         _print(summaries[0] | {"subjects": summaries}, as_json, [o for o in out_paths])
         return
-    summary = _solve_and_write(inp, run, spec_m, list(out_paths))
+    summary = _solve(inp, run, spec_m, list(out_paths), echo)
     _print(summary, as_json, out_paths)
 
 
@@ -598,103 +490,19 @@ def _print(summary: dict, as_json: bool, out_paths) -> None:
         click.echo(" ".join(parts) + (f" -> {', '.join(outs)}" if outs else ""))
 
 
-def _assess(rec, obs, summary: dict):
-    """``rec`` self-assessed (windowed runs assess the whole), with ``quality`` and ``auto`` in ``summary``.
+def _solve(inp, run, spec_m, out_paths, echo) -> dict:
+    """:func:`gttnet.pipeline.solve_and_write`, its refusals as one ``Error:`` line."""
+    from gttnet.pipeline import solve_and_write
 
-    Multi-subject results (rows per subject) are left as they are.
-    """
-    from gttnet.methods import assessed
+    if run["subjects"] > 1:
+        from gttnet.apps.multi_subject import reconstruct_loaded_subjects
 
-    if rec.n_images != obs.n_images:
-        return rec
-    rec = assessed(rec, obs)
-    summary["quality"] = rec.info["quality"]
-    if "auto" in rec.info:
-        summary["auto"] = rec.info["auto"]
-    return rec
+        run = {**run, "multi_subject": reconstruct_loaded_subjects}
 
-
-def _solve_and_write(inp: dict, run: dict, spec_m, out_paths: list[str]) -> dict:
-    """Run the method on the resolved input, write its outputs, and return the summary."""
-    from gttnet.methods import check_sequencing, reconstruct
-    from gttnet.recording import export_keypoints_on_clock, marker_names, timing_options, write_outputs
-
-    method, options, quiet, progress = run["method"], run["options"], run["quiet"], run["progress"]
-    loaded, view, obs = inp["loaded"], inp["view"], inp["view"].observations
-    if not run["sequencing_given"] and not quiet:
-        click.echo(
-            f"sequencing: {obs.sequencing} (the richest the input supports; "
-            "choose with --sequencing none|partial|full)",
-            err=True,
-        )
-    check_sequencing(obs, spec_m)
-    blind = int((~obs.visible.any(axis=1)).sum())
-    if blind and obs.sequencing == "none" and not quiet:
-        click.echo(
-            f"warning: {blind} of {obs.n_images} images see no joint; without sequencing nothing places them, "
-            "so their 3-D poses are placeholders (each camera's frame order, --sequencing partial, "
-            "interpolates them)",
-            err=True,
-        )
-    held: list[str] = []
     try:
-        if run["subjects"] > 1:
-            from gttnet.apps.multi_subject import reconstruct_loaded_subjects
-
-            rec, summary = reconstruct_loaded_subjects(
-                loaded, method=method, n_subjects=run["subjects"], seed=run["seed"] or 0, **options
-            )
-        elif run["window_arg"] is not None:
-            from gttnet.windowed import reconstruct_windowed
-
-            with _time_warnings_held() as held:
-                rec = reconstruct_windowed(
-                    obs,
-                    method,
-                    window=run["window_arg"],
-                    progress=progress,
-                    **timing_options(method, view),
-                    **options,
-                )
-            summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
-        else:
-            with _time_warnings_held() as held:
-                rec = reconstruct(obs, method, **timing_options(method, view), **options)
-            summary = _report(loaded, rec) if loaded is not None else _report_recording(view, rec, inp["gt"])
+        return solve_and_write(inp, run, spec_m, out_paths, echo, _WarningLines(logging.WARNING))
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
-    summary.update(_timing_fields(rec, view, quiet=quiet, held=held))
-    if blind:
-        summary["images_without_joints"] = blind
-    rec = _assess(rec, obs, summary)
-    if out_paths:
-        handler = _WarningLines(logging.WARNING)
-        logging.getLogger("gttnet.recording").addHandler(handler)
-        try:
-            write_outputs(
-                rec,
-                view,
-                out_paths,
-                run["resample_hz"],
-                image_index=inp["image_index"],
-                source=inp["source"],
-                recording_json=inp["recording_json"],
-                trc=run["trc"] | {"names": marker_names(inp.get("skeleton"), obs)},
-            )
-        except ValueError as exc:
-            raise click.ClickException(str(exc)) from exc
-        finally:
-            logging.getLogger("gttnet.recording").removeHandler(handler)
-    if run["export_keypoints"] is not None:
-        export_keypoints_on_clock(
-            inp.get("recording"),
-            rec,
-            view,
-            run["export_keypoints"],
-            rate_hz=run["resample_hz"],
-            overwrite=run["overwrite"],
-        )
-    return summary
 
 
 def _gttnet_options(method: str, model_path: str | None, refine: bool | None) -> dict:
@@ -711,25 +519,6 @@ def _gttnet_options(method: str, model_path: str | None, refine: bool | None) ->
             )
         options["refine"] = refine
     return options
-
-
-def _report_recording(view, rec, gt_points) -> dict:
-    obs = view.observations
-    out = {
-        "method": rec.method,
-        "sequencing": rec.sequencing,
-        "n_images": rec.n_images,
-        "n_joints": rec.n_joints,
-        "n_cameras": len(view.camera_names),
-        "seconds": round(float(rec.seconds), 4),
-        "observed_fraction": round(float(obs.visible.mean()), 4),
-    }
-    if "windows" in rec.info:
-        out["windows"] = rec.info["windows"]
-    out.update(_method_fields(rec, view.camera_names))
-    if gt_points is not None:
-        out["mpjpe_mm"] = round(_mpjpe_reconstructed(rec, gt_points), 4)
-    return out
 
 
 def register(main: click.Group) -> None:
