@@ -208,6 +208,20 @@ def _animation(
     return path
 
 
+def _error_table(path: Path, err: np.ndarray, cam_id: np.ndarray, names, joint_names) -> Path:
+    """``reprojection_error.csv``: per camera and joint, the count, mean and median of ``err`` (N, J) pixels."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["camera", "joint", "n", "mean_px", "median_px"])
+        for v, name in enumerate(names):
+            e = err[cam_id == v]
+            for jj, jn in enumerate(joint_names):
+                col = e[:, jj][np.isfinite(e[:, jj])]
+                mean, med = (f"{col.mean():.3f}", f"{np.median(col):.3f}") if col.size else ("", "")
+                w.writerow([name, jn, col.size, mean, med])
+    return path
+
+
 def render_result(
     result: str | Path,
     out: str | Path,
@@ -266,17 +280,9 @@ def render_result(
             fps,
             width_px,
         )
-    table = out / "reprojection_error.csv"
-    with open(table, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["camera", "joint", "n", "mean_px", "median_px"])
-        for v, name in enumerate(names):
-            e = err[cam_id == v]
-            for jj, jn in enumerate(rec.skeleton.joint_names):
-                col = e[:, jj][np.isfinite(e[:, jj])]
-                mean, med = (f"{col.mean():.3f}", f"{np.median(col):.3f}") if col.size else ("", "")
-                w.writerow([name, jn, col.size, mean, med])
-    written["reprojection_error"] = table
+    written["reprojection_error"] = _error_table(
+        out / "reprojection_error.csv", err, cam_id, names, rec.skeleton.joint_names
+    )
     time_s = arrays.get("time_s", np.full(X.shape[0], np.nan))
     timed = bool(np.isfinite(time_s).all())
     order = arrays.get("time_order", np.arange(X.shape[0]))
@@ -382,16 +388,7 @@ def render_capture_result(
     err = np.linalg.norm(proj - det, axis=-1)
     out.mkdir(parents=True, exist_ok=True)
     names = [f"cam_{v}" for v in range(int(cam.max()) + 1)]
-    table = out / "reprojection_error.csv"
-    with open(table, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["camera", "joint", "n", "mean_px", "median_px"])
-        for v, name in enumerate(names):
-            e = err[cam == v]
-            for jj, jn in enumerate(obs.skeleton.joint_names):
-                col = e[:, jj][np.isfinite(e[:, jj])]
-                mean, med = (f"{col.mean():.3f}", f"{np.median(col):.3f}") if col.size else ("", "")
-                w.writerow([name, jn, col.size, mean, med])
+    table = _error_table(out / "reprojection_error.csv", err, cam, names, obs.skeleton.joint_names)
     written: dict[str, Path] = {"reprojection_error": table}
     order = np.argsort(rank, kind="stable")
     written["timing"] = _timing_plot(
