@@ -422,7 +422,7 @@ class SequenceDataset(torch.utils.data.Dataset):
         self.variants = list(variants)
         self.indices = list(range(len(source))) if indices is None else list(indices)
         self._cache: dict[tuple[int, str, str], TrainItem] = {}
-        self._skipped = 0  # captures skipped as unusable (a guard against skipping every one)
+        self._unusable: dict[tuple[int, str, str], GttNetError] = {}  # views no solver can use, and why
         self._disk_full = False
         self._refused = 0
 
@@ -450,7 +450,25 @@ class SequenceDataset(torch.utils.data.Dataset):
         return len(self.indices)
 
     def __getitem__(self, key: tuple[int, int, str | None]) -> TrainItem:
+        """The item at ``key = (position, salt, sequencing or None)``.
+
+        A capture no solver can use (no joint seen by two cameras: far, occluded or two-camera recipes make
+        a few) is skipped for the next position, as a data loader skips a bad file; it is warned about once
+        and never prepared again.
+
+        Raises:
+            GttNetError: No capture of the dataset is usable.
+        """
         pos, salt, sequencing = key
+        last: GttNetError | None = None
+        for step in range(len(self)):
+            try:
+                return self._item((pos + step) % len(self), salt, sequencing)
+            except GttNetError as exc:
+                last = exc
+        raise GttNetError(f"none of the {len(self)} captures can be used for training; the last: {last}")
+
+    def _item(self, pos: int, salt: int, sequencing: str | None) -> TrainItem:
         index = self.indices[pos]
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, index, salt]))
         if sequencing is None:
@@ -459,6 +477,8 @@ class SequenceDataset(torch.utils.data.Dataset):
         ck = (index, sequencing, variant)
         if ck in self._cache:
             return self._cache[ck]
+        if ck in self._unusable:
+            raise self._unusable[ck]
         path = None
         if self.cache == "disk":
             assert self.cache_dir is not None  # checked in __init__
@@ -477,13 +497,9 @@ class SequenceDataset(torch.utils.data.Dataset):
         try:
             item = prepare_item(obs, gt, k=self.k, name=f"{index}/{variant}", stream_order=self.stream_order)
         except GttNetError as exc:
-            # A capture no solver can use (no joint seen by two cameras: far, occluded or two-camera
-            # recipes make a few): train on the next one, as a data loader would skip a bad file.
-            if self._skipped >= len(self):
-                raise
-            self._skipped += 1
+            self._unusable[ck] = exc
             log.warning("capture %d (%s) skipped: %s", index, sequencing, exc)
-            return self[((pos + 1) % len(self), salt, sequencing)]
+            raise
         if path is not None and not self._disk_full:
             self._write_cache(item, path)
         elif self.cache == "memory":

@@ -456,3 +456,9 @@ def test_an_unusable_capture_is_skipped_with_a_warning(tmp_path, caplog):
         item = ds[(0, 0, None)]
     assert "capture 0 (full) skipped" in caplog.text and "triangulable" in caplog.text
     assert torch.equal(item.inputs.x_init, ref[(1, 0, None)].inputs.x_init)
+    # Skipped every epoch, it is warned about once and never stops the run (a global count of skips did).
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        for _ in range(3 * len(ds)):
+            assert torch.equal(ds[(0, 0, None)].inputs.x_init, item.inputs.x_init)
+    assert "skipped" not in caplog.text
