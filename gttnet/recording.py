@@ -194,7 +194,8 @@ def _is_number(text: str) -> bool:
 def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
     """The recording once per subject, each camera's detections those of that person.
 
-    Where an OpenPose camera folder holds several people in a frame, people are associated across the
+    Where an OpenPose camera folder holds several people in a frame (its keypoints' ``crowd``, read once
+    with them), people are associated across the
     unsynchronized cameras and through time (:func:`gttnet.association.associate`): the subjects are the
     people most cameras agree on, so a bystander seen by one camera for a few frames never takes over.
     Cameras whose sources hold one person per frame keep it as a candidate. A recording with one person
@@ -202,7 +203,7 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
 
     Args:
         recording: The loaded :class:`gttdata.recording.Recording`.
-        spec: Its spec (the keypoint sources to re-read with every person).
+        spec: Its spec (named in messages).
         n_subjects: How many people to return, most supported first (stable ids 0, 1, ...).
 
     Returns:
@@ -211,17 +212,9 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
     Raises:
         KeypointFormatError: Fewer people than ``n_subjects`` are seen by two or more cameras.
     """
-    from gttdata.detectors.openpose import read_openpose_people
     from gttnet.association import CameraPeople, associate
 
-    crowds = []
-    reader_log = logging.getLogger("gttdata.detectors.openpose")
-    was, reader_log.disabled = reader_log.disabled, True  # its stray-file warnings were given on loading
-    try:
-        for kp in recording.keypoints:
-            crowds.append(read_openpose_people(Path(kp.source)) if kp.fmt == "openpose" else None)
-    finally:
-        reader_log.disabled = was
+    crowds = [kp.crowd for kp in recording.keypoints]
     if all(c is None for c in crowds):
         if n_subjects > 1:
             raise KeypointFormatError(
@@ -249,7 +242,9 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
         kps, times = [], []
         for v, (kp, t, rows) in enumerate(zip(recording.keypoints, tables, s.detections, strict=True)):
             score = np.where(t.score[rows] > 0, t.score[rows], np.nan)
-            kps.append(dataclasses.replace(kp, xy=t.keypoints_px[rows], score=score, frame=t.frame[rows]))
+            kps.append(
+                dataclasses.replace(kp, xy=t.keypoints_px[rows], score=score, frame=t.frame[rows], crowd=None)
+            )
             st = recording.stream_time_s[v]  # a row's time follows its frame number
             times.append(None if st is None else st[np.searchsorted(kp.frame, t.frame[rows])])
         out.append(dataclasses.replace(recording, keypoints=tuple(kps), stream_time_s=tuple(times)))

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +103,8 @@ class Keypoints2D:
         keypoint_set: Name of the detector keypoint set (a key of :data:`KEYPOINT_SETS`) or ``""``.
         source: File or folder read, for messages.
         fmt: Format name (a key of :data:`FORMATS`).
+        crowd: Where a frame held several people (rows keep the most confident): every person of every
+            frame, ``(frame (M,) int64, xy (M, J, 2), score (M, J))`` with NaN where not found; None otherwise.
     """
 
     xy: np.ndarray
@@ -112,6 +114,7 @@ class Keypoints2D:
     keypoint_set: str = ""
     source: str = ""
     fmt: str = ""
+    crowd: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         xy = np.asarray(self.xy, dtype=np.float64)

@@ -29,7 +29,6 @@ __all__ = [
     "frame_files",
     "frame_number",
     "read_openpose",
-    "read_openpose_people",
     "write_openpose",
 ]
 
@@ -123,49 +122,14 @@ def _people(path: Path, doc: object) -> list[np.ndarray]:
     return out
 
 
-def _person(path: Path, doc: object) -> np.ndarray | None:
-    """The kept person's flat keypoint array (highest summed confidence), or None when the frame has nobody."""
+def _best(people: list[np.ndarray]) -> np.ndarray | None:
+    """The person kept for a frame: the highest summed confidence, or None when the frame has nobody."""
     best, best_score = None, -np.inf
-    for arr in _people(path, doc):
+    for arr in people:
         score = float(np.nansum(arr[2::3]))
         if best is None or score > best_score:
             best, best_score = arr, score
     return best
-
-
-def read_openpose_people(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Every person of every frame of an OpenPose camera folder, or None when no frame has two people.
-
-    The same frame files as :func:`read_openpose` (stray and duplicate files skipped).
-
-    Returns:
-        ``(frame (M,) int64, xy (M, J, 2) pixels NaN where not found, score (M, J) NaN where not found)``,
-        one row per person, frames in order; None when every frame holds at most one person.
-
-    Raises:
-        KeypointFormatError: As :func:`read_openpose`, or joint counts that differ between people.
-    """
-    folder = Path(folder)
-    frames = frame_files(folder, sorted(folder.glob("*.json")))
-    rows: list[tuple[int, np.ndarray]] = []
-    crowded = False
-    for n, path in frames:
-        people = _people(path, read_json(path))
-        crowded |= len(people) > 1
-        rows += [(n, a) for a in people]
-    if not crowded:
-        return None
-    sizes = {a.size for _, a in rows}
-    if len(sizes) != 1:
-        raise KeypointFormatError(
-            f"{folder}: people with different joint counts ({sorted(s // 3 for s in sizes)})"
-        )
-    J = sizes.pop() // 3
-    a = np.stack([r for _, r in rows]).reshape(len(rows), J, 3)
-    found = a[..., 2] > 0
-    xy = np.where(found[..., None], a[..., :2], np.nan)
-    score = np.where(found, a[..., 2], np.nan)
-    return np.asarray([n for n, _ in rows], dtype=np.int64), xy, score
 
 
 def read_openpose(folder: Path) -> Keypoints2D:
@@ -186,9 +150,12 @@ def read_openpose(folder: Path) -> Keypoints2D:
     if not frames:
         raise KeypointFormatError(f"{folder}: no frame file left once stray and duplicate files are skipped")
     rows: list[np.ndarray | None] = []
+    everyone: list[tuple[int, np.ndarray]] = []  # every person of every frame, for a crowded camera
     n_joints = None
-    for _, path in frames:
-        arr = _person(path, read_json(path))
+    for n, path in frames:
+        people = _people(path, read_json(path))
+        arr = _best(people)
+        everyone += [(n, a) for a in people]
         if arr is not None:
             if n_joints is None:
                 n_joints = arr.size // 3
@@ -218,7 +185,31 @@ def read_openpose(folder: Path) -> Keypoints2D:
         keypoint_set=kset,
         source=str(folder),
         fmt="openpose",
+        crowd=_crowd(folder, everyone, len(frames)),
     )
+
+
+def _crowd(
+    folder: Path, everyone: list[tuple[int, np.ndarray]], n_frames: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Every person of every frame, or None when no frame held two people.
+
+    Returns ``(frame (M,), xy (M, J, 2), score (M, J))``, NaN where a joint was not found.
+
+    Raises:
+        KeypointFormatError: People with different joint counts.
+    """
+    if len(everyone) <= len({n for n, _ in everyone}):
+        return None
+    sizes = {a.size for _, a in everyone}
+    if len(sizes) != 1:
+        raise KeypointFormatError(
+            f"{folder}: people with different joint counts ({sorted(s // 3 for s in sizes)})"
+        )
+    a = np.stack([r for _, r in everyone]).reshape(len(everyone), sizes.pop() // 3, 3)
+    found = a[..., 2] > 0  # OpenPose writes 0, 0, 0 for a joint it did not find
+    xy = np.where(found[..., None], a[..., :2], np.nan)
+    return np.asarray([n for n, _ in everyone], dtype=np.int64), xy, np.where(found, a[..., 2], np.nan)
 
 
 def write_openpose(kp: Keypoints2D, folder: Path, *, prefix: str | None = None) -> Path:
