@@ -251,27 +251,34 @@ def choose_subjects(recording, spec, n_subjects: int = 1) -> list:
     return out
 
 
-def load_view(
+def load_views(
     spec,
     sequencing: str | None,
     *,
     min_confidence=None,
     weights: bool = True,
     seed: int = 0,
-    subject: int = 0,
     n_subjects: int = 1,
-):
-    """``(recording, view, ground truth or None)`` of a spec; the calibration's warnings are logged.
+) -> list[tuple[Any, Any, Any]]:
+    """``[(recording, view, ground truth or None), ...]``, one per subject; the calibration's warnings are logged.
 
-    With several people in the keypoint files, the view is that of subject ``subject`` of the
-    ``n_subjects`` best supported (:func:`choose_subjects`).
+    The files are read and the people associated once: with several people in the keypoint files, the
+    views are those of the ``n_subjects`` best-supported subjects, in order (:func:`choose_subjects`).
     """
     from gttdata.recording import Recording, ground_truth_for
 
-    rec = choose_subjects(Recording.load(spec), spec, n_subjects)[subject]
-    view = rec.view(sequencing, min_confidence=min_confidence, weights=weights, seed=seed)
-    gt = None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth)
-    return rec, view, gt
+    out = []
+    for rec in choose_subjects(Recording.load(spec), spec, n_subjects):
+        view = rec.view(sequencing, min_confidence=min_confidence, weights=weights, seed=seed)
+        out.append(
+            (rec, view, None if spec.ground_truth is None else ground_truth_for(view, spec.ground_truth))
+        )
+    return out
+
+
+def load_view(spec, sequencing: str | None, *, min_confidence=None, weights: bool = True, seed: int = 0):
+    """``(recording, view, ground truth or None)`` of a spec's best-supported subject (:func:`load_views`)."""
+    return load_views(spec, sequencing, min_confidence=min_confidence, weights=weights, seed=seed)[0]
 
 
 def to_trc_frame(points: np.ndarray, up: str) -> np.ndarray:

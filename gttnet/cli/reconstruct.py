@@ -104,15 +104,14 @@ def _resolve_input(
     seed,
     split=None,
     skeleton=None,
-    subject=0,
     n_subjects=1,
-) -> dict:
+) -> list[dict]:
     """The run's input: a recording (calibration + keypoints, project file, Pose2Sim/anipose folder) or a file.
 
-    A recording whose keypoint files hold several people gives the view of person ``subject`` of the
-    ``n_subjects`` most cameras agree on (:func:`gttnet.recording.choose_subjects`).
+    A list with one input, except for a recording whose keypoint files hold several people: one input per
+    person, the ``n_subjects`` most cameras agree on (:func:`gttnet.recording.choose_subjects`).
     """
-    from gttnet.recording import load_view, recording_spec
+    from gttnet.recording import load_views, recording_spec
 
     spec = recording_spec(
         input_paths,
@@ -134,28 +133,30 @@ def _resolve_input(
         for lg in loggers:
             lg.addHandler(handler)
         try:
-            recording, view, gt = load_view(
+            views = load_views(
                 spec,
                 sequencing,
                 min_confidence=min_confidence,
                 weights=weights,
                 seed=seed or 0,
-                subject=subject,
                 n_subjects=n_subjects,
             )
         finally:
             for lg in loggers:
                 lg.removeHandler(handler)
-        return {
-            "loaded": None,
-            "view": view,
-            "gt": gt,
-            "source": str(spec.calibration),
-            "image_index": view.image_index,
-            "recording_json": spec_to_json(spec),
-            "skeleton": recording.skeleton,
-            "recording": recording,
-        }
+        return [
+            {
+                "loaded": None,
+                "view": view,
+                "gt": gt,
+                "source": str(spec.calibration),
+                "image_index": view.image_index,
+                "recording_json": spec_to_json(spec),
+                "skeleton": recording.skeleton,
+                "recording": recording,
+            }
+            for recording, view, gt in views
+        ]
     if len(input_paths) != 1:
         raise click.UsageError("give one INPUT file, a project file, or --calibration with --keypoints")
     import warnings
@@ -183,14 +184,16 @@ def _resolve_input(
         raise click.ClickException(str(exc)) from exc
     except RigError as exc:  # bad cameras in the file: name it
         raise click.ClickException(f"{input_paths[0]}: {exc}") from exc
-    return {
-        "loaded": loaded,
-        "view": view_of_loaded(loaded),
-        "gt": None if loaded.ground_truth is None else loaded.ground_truth.points3d,
-        "source": loaded.source,
-        "image_index": loaded.image_index,
-        "recording_json": "",
-    }
+    return [
+        {
+            "loaded": loaded,
+            "view": view_of_loaded(loaded),
+            "gt": None if loaded.ground_truth is None else loaded.ground_truth.points3d,
+            "source": loaded.source,
+            "image_index": loaded.image_index,
+            "recording_json": "",
+        }
+    ]
 
 
 @click.command("reconstruct")
@@ -452,14 +455,14 @@ def reconstruct_cmd(
         quiet=quiet,
         sequencing_given=sequencing is not None,
     )
-    inp = _resolve_input(input_paths, weights, **resolve)
+    inputs = _resolve_input(input_paths, weights, **resolve, n_subjects=subjects)
+    inp = inputs[0]
     echo = lambda line: click.echo(line, err=True)  # noqa: E731
     if subjects > 1 and inp["loaded"] is None:
         # A recording with several people: one reconstruction per person (stable ids by cross-view
         # support), each written to its own files (result_p0.trc, result_p1.trc, ...).
         summaries = []
-        for k in range(subjects):
-            inp_k = _resolve_input(input_paths, weights, **resolve, subject=k, n_subjects=subjects)
+        for k, inp_k in enumerate(inputs):
             outs = [str(Path(o).with_name(f"{Path(o).stem}_p{k}{Path(o).suffix}")) for o in out_paths]
             export = None if export_keypoints is None else f"{export_keypoints}_p{k}"
             summary = _solve(inp_k, {**run, "subjects": 1, "export_keypoints": export}, spec_m, outs, echo)
