@@ -147,31 +147,10 @@ def skeleton_from_limbs(limbs: np.ndarray, n_joints: int) -> Skeleton:
         sk = get_skeleton(name)
         if sk.n_joints == n_joints and {frozenset(map(int, e)) for e in sk.limbs} == want:
             return sk
-    adj: dict[int, list[int]] = {i: [] for i in range(n_joints)}
-    for e in sorted(tuple(sorted(e)) for e in want):
-        adj[e[0]].append(e[1])
-        adj[e[1]].append(e[0])
-    parents = [-2] * n_joints
-    for root in range(n_joints):
-        if parents[root] != -2:
-            continue
-        parents[root] = -1
-        queue = [root]
-        while queue:
-            i = queue.pop(0)
-            for k in adj[i]:
-                if parents[k] == -2:
-                    parents[k] = i
-                    queue.append(k)
-    tree = {frozenset((i, p)) for i, p in enumerate(parents) if p >= 0}
-    extra = tuple((a, b) for a, b in sorted(tuple(sorted(e)) for e in want - tree))
-    return Skeleton(
-        name=f"limbs{n_joints}",
-        joint_names=tuple(f"j{i}" for i in range(n_joints)),
-        parents=tuple(parents),
-        mirror=tuple(range(n_joints)),
-        extra_bones=extra,
-    )
+    from gttdata.skeletons_detectors import skeleton_from_edges
+
+    names = tuple(f"j{i}" for i in range(n_joints))
+    return skeleton_from_edges(f"limbs{n_joints}", names, [(names[a], names[b]) for a, b in map(tuple, want)])
 
 
 def _unwrap(raw: object) -> object:
