@@ -189,7 +189,8 @@ def reconstruct_stream_sync(
     """``sync`` on camera streams estimated from the poses, for captures with no timing at all.
 
     Without sequencing, each camera's frame order is taken from several sources (:mod:`gttnet.sync.streams`:
-    the pose graph of the pseudo-triangulated poses, DLOE's recovered order, the root trajectory, and
+    the pose graph of the pseudo-triangulated poses, the pseudo-triangulation's partner graph, DLOE's
+    recovered order, the root trajectory, and
     GTT-Net's order where GTT-Net is the fallback); the cameras' clocks are recovered on each, and the
     streams whose clocks explain the images best are kept (lowest clock-fit residual). Then the
     high-pass-filter prior solves on the recovered times, as :func:`reconstruct_sync` does. Given streams
@@ -230,7 +231,7 @@ def reconstruct_stream_sync(
     if order_sources is None and fallback == "gttnet":
         sources += ("gttnet",)
     ran: dict[str, Reconstruction] = {}
-    for name in ("dloe", "gttnet"):
+    for name in ("pseudo", "dloe", "gttnet"):
         if name in sources:
             ran[name] = reconstruct(obs, name)
     views = _candidate_views(obs, sources, order_k=order_k, ranks={k: r.order for k, r in ran.items()})

@@ -5,6 +5,10 @@ source gives a global rank of the images, and each camera's frames are put in th
 
 - ``pose-graph``: the spectral order of a pose graph over the pseudo-triangulated poses
   (:func:`gttnet.model.inputs.order_streams`); right where the motion does not come back to the same poses.
+- ``pseudo``: the spectral order of the pseudo-triangulation's partner graph (each image linked to the
+  other-camera images it triangulates best with: only images of nearly the same pose, so nearly the same
+  moment, triangulate well); the cheapest source, and right where a fast motion at a low frame rate puts
+  the pose graph and DLOE's order wrong.
 - ``dloe``: the order DLOE recovers along with its reconstruction.
 - ``gttnet``: the order GTT-Net recovers (only where a model runs anyway, e.g. as the fallback).
 - ``root``: the position of the skeleton's centre along the main direction it travels (walking, running:
@@ -43,7 +47,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Order sources ``stream-sync`` tries by default (``gttnet`` joins them where GTT-Net is the fallback).
-ORDER_SOURCES = ("pose-graph", "dloe", "root")
+ORDER_SOURCES = ("pose-graph", "pseudo", "dloe", "root")
 #: A source whose streams' noise estimate exceeds the smallest by this factor is misordered: not kept
 #: (unless every source is).
 MISORDERED_NOISE = 1.25
