@@ -244,6 +244,41 @@ def _streams_view(obs: Observations, x_init: np.ndarray, *, k: int) -> tuple[Obs
     return replace(obs, sequencing="partial", stream_index=stream_ranks(rank, obs.cam_id)), rank
 
 
+def _quieter_streams(
+    obs: Observations, view: Observations, rank: np.ndarray, cost: np.ndarray
+) -> tuple[Observations, np.ndarray]:
+    """The pose graph's streams, or the pseudo-triangulation partner graph's where those read as quieter.
+
+    The partner graph links each image to the other-camera images it triangulates best with (only images
+    of nearly the same pose, so nearly the same moment, do); its spectral order is right where a fast
+    motion at a low frame rate makes whole poses a poor guide. A wrong order adds to the second
+    differences along each stream that :func:`gttnet.geometry.noise.stream_noise_px` reads, so the order
+    whose streams read as less noisy is kept.
+
+    Args:
+        obs: The order-free capture, N images.
+        view: Its ``partial`` view with the pose graph's streams.
+        rank: The pose graph's global rank, shape ``(N,)``.
+        cost: Pseudo-triangulation cost between images, shape ``(N, N)`` (inf where not paired).
+
+    Returns:
+        ``(view, rank)`` of the kept order.
+    """
+    from gttnet.baselines.pseudo import top_q_affinity
+    from gttnet.geometry.noise import stream_noise_px
+    from gttnet.geometry.ordering import spectral_order, stream_ranks
+
+    if obs.n_images < 3:
+        return view, rank
+    other = np.asarray(spectral_order(top_q_affinity(cost, q=2)))
+    other_si = stream_ranks(other, obs.cam_id)
+    mine = stream_noise_px(obs.keypoints_px, obs.visible, obs.cam_id, np.asarray(view.stream_index))
+    theirs = stream_noise_px(obs.keypoints_px, obs.visible, obs.cam_id, other_si)
+    if mine is None or theirs is None or theirs >= mine:
+        return view, rank
+    return replace(obs, sequencing="partial", stream_index=other_si), other
+
+
 def prepare_stream_ordered_inputs(
     obs: Observations, *, k: int, order_k: int, dtype: torch.dtype = torch.float32
 ) -> SequenceInput:
@@ -281,6 +316,7 @@ def stream_ordered_view_and_inputs(
 
     pt = pseudo_triangulate(obs.centers(), obs.rays(), obs.visible, obs.cam_id)
     view, rank = _streams_view(obs, pt.X_init, k=order_k)
+    view, rank = _quieter_streams(obs, view, rank, pt.cost)
     seq = prepare_inputs(view, k=k, dtype=dtype, pseudo=pt)
     assert seq.chain is not None  # a partial view always has its chain
     chain = pose_weighted_chain(seq.chain.numpy(), pt.X_init)
