@@ -8,7 +8,8 @@ Run (the numbers of docs/METHOD.md, "Order sources", and of docs/MODEL_CARD_POIN
 
 Default data: the held-out quadruped of ``recipes/gttdata/heldout.yaml`` filmed at 10 Hz for 8 s (4 cameras,
 320 images): turns and walks fast for the rate, where whole poses are a poor guide to time. ``--methods``
-takes ``method@sequencing`` items (``hpf@full`` is HPF given the true timestamps, the reference). Prints
+takes ``method@sequencing`` items, a method with options as ``bench_baselines.py`` takes them
+(``gttnet:model=runs/x/checkpoint.pt;top_q=4@none``; ``hpf@full`` is HPF given the true timestamps). Prints
 one row per capture (MPJPE, mm; ground truth scores the results only) and the mean / median per method.
 """
 
@@ -24,6 +25,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from bench_baselines import parse_method  # noqa: E402
 
 from gttdata.capture.views import make_view  # noqa: E402
 from gttdata.generate_plan import build_sample  # noqa: E402
@@ -50,7 +52,7 @@ def main() -> None:
     logging.disable(logging.WARNING)
     warnings.filterwarnings("ignore")
     recipe = load_recipe(args.recipe, ([] if args.no_defaults else DEFAULTS) + list(args.overrides))
-    specs = [tuple(s.split("@")) for s in args.methods.split(",")]
+    specs = [tuple(s.rsplit("@", 1)) for s in args.methods.split(",")]
     errors: dict[str, list[float]] = {f"{m}@{q}": [] for m, q in specs}
     print("| capture | images | " + " | ".join(errors) + " |")
     print("|---|---|" + "---|" * len(errors))
@@ -62,7 +64,8 @@ def main() -> None:
             obs, gt = make_view(sample, q)
             n = obs.n_images
             try:
-                rec = reconstruct(obs, m)
+                name, options = parse_method(m)
+                rec = reconstruct(obs, name, **options)
                 e = float(1000.0 * np.nanmean(np.linalg.norm(rec.points3d - gt.points3d, axis=-1)))
             except GttNetError as exc:
                 print(f"# {sample.motion_name} {m}@{q}: {exc}")

@@ -250,7 +250,7 @@ class GTTNetReconstructor:
         streams_view, pose_rank = obs, None
         if streams:
             streams_view, seq, pose_rank = stream_ordered_view_and_inputs(
-                obs, k=cfg.k, order_k=STREAM_ORDER_K
+                obs, k=cfg.k, order_k=STREAM_ORDER_K, partner_order=cfg.pointnet
             )
         else:
             seq = prepare_inputs(obs, k=cfg.k, candidates=self.candidates)
