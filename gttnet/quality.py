@@ -234,12 +234,19 @@ def _nanmedian(a: np.ndarray) -> float:
     return float(np.median(v)) if v.size else float("nan")
 
 
-def features(obs: Observations, rec: Reconstruction) -> dict[str, Any]:
+def features(
+    obs: Observations, rec: Reconstruction, *, noise_px: float | None = None, order: np.ndarray | None = None
+) -> dict[str, Any]:
     """The evidence of :data:`FEATURES` for one reconstruction, plus per-joint terms.
 
     Args:
         obs: The observations the reconstruction was made from (the same image order).
         rec: The reconstruction, ``points3d`` of shape ``(N, J, 3)`` in metres.
+        noise_px: The capture's 2-D noise read along other streams (e.g. another method's recovered
+            order), pixels; the smaller of it and the estimate along this reconstruction's own order is
+            used (a wrong order only adds to the frame-to-frame differences the noise is read from).
+        order: A rank of the images in time to read the evidence along (shape ``(N,)``), in place of the
+            reconstruction's own recovered order: e.g. the order whose streams read the least noise.
 
     Returns:
         Scalars ``sigma_px``, ``residual_px`` and the :data:`FEATURES` (millimetres, ``excess`` a ratio),
@@ -247,12 +254,14 @@ def features(obs: Observations, rec: Reconstruction) -> dict[str, Any]:
         quadrature of its lateral and depth terms (relative weights; NaN where not reconstructed).
     """
     X = np.asarray(rec.points3d, dtype=np.float64)
-    rank = _recovered_rank(obs, rec)
+    rank = _recovered_rank(obs, rec) if order is None else np.asarray(order)
     r, _z, s = _reprojection(obs, X)
     si = _stream_index(obs, rank)
     sigma = None
     if si is not None:
         sigma = stream_noise_px(obs.keypoints_px, obs.visible, obs.cam_id, si)
+    if noise_px is not None and math.isfinite(noise_px) and (sigma is None or noise_px < sigma):
+        sigma = float(noise_px)
     residual = _nanmedian(r) / _RAYLEIGH_MEDIAN
     if sigma is None or not math.isfinite(sigma):
         sigma_eff = residual if math.isfinite(residual) else 1.0
@@ -365,12 +374,16 @@ def _reasons(f: dict[str, Any], expected: float) -> list[str]:
     return out
 
 
-def assess(obs: Observations, rec: Reconstruction) -> tuple[dict[str, Any], np.ndarray]:
+def assess(
+    obs: Observations, rec: Reconstruction, *, noise_px: float | None = None, order: np.ndarray | None = None
+) -> tuple[dict[str, Any], np.ndarray]:
     """Self-assessment of ``rec``: the ``quality`` summary and the per-point uncertainty.
 
     Args:
         obs: The observations the reconstruction was made from.
         rec: The reconstruction.
+        noise_px: The capture's noise read along other streams, pixels (see :func:`features`).
+        order: The time order to read the evidence along (see :func:`features`).
 
     Returns:
         ``(quality, uncertainty)``: ``quality`` is JSON-serialisable with ``expected_error_mm`` (predicted
@@ -378,7 +391,7 @@ def assess(obs: Observations, rec: Reconstruction) -> tuple[dict[str, Any], np.n
         ``noise_mm``, ``lateral_mm``, ``geometry_mm``, ``roughness_mm``, ``excess``);
         ``uncertainty`` has shape ``(N, J)``, millimetres (:func:`joint_uncertainty_mm`).
     """
-    f = features(obs, rec)
+    f = features(obs, rec, noise_px=noise_px, order=order)
     expected = predict_mm(f)
     unc = joint_uncertainty_mm(f, expected)
     q: dict[str, Any] = {"expected_error_mm": round(expected, 3), "reasons": _reasons(f, expected)}
