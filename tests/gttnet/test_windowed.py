@@ -154,6 +154,30 @@ def test_sync_windows_solve_on_the_recordings_clocks(scene_factory, monkeypatch)
     assert len(calls) == 2  # the recording's, and the first window's own when auto assesses sync there
 
 
+def test_hpf_windows_start_their_weight_search_at_the_previous_windows(scene_factory, monkeypatch):
+    """Each window after the first cross-validates HPF's weight from its neighbour's choice."""
+    import dataclasses
+
+    import gttnet.methods as methods
+
+    spec = methods.method_spec("hpf")
+    seen: list[tuple[float | None, float]] = []
+
+    def spy(obs, **kwargs):
+        rec = spec.fn(obs, **kwargs)
+        seen.append((kwargs.get("lam_start"), rec.info["lam"]))
+        return rec
+
+    monkeypatch.setitem(methods._REGISTRY, "hpf", dataclasses.replace(spec, fn=spy))
+    obs, gt = make_view(scene_factory(n_cameras=4, n_joints=8, frames_per_camera=60, seed=5), "full")
+    rec = reconstruct_windowed(obs, "hpf", window=80, overlap=20, n_folds=3)
+    assert len(seen) == rec.info["windows"] >= 3
+    assert seen[0][0] is None
+    assert [start for start, _ in seen[1:]] == [lam for _, lam in seen[:-1]]
+    fixed = reconstruct_windowed(obs, "hpf", window=80, overlap=20, lam=seen[0][1])
+    assert mpjpe_mm(rec.points3d, gt.points3d) < 1.2 * mpjpe_mm(fixed.points3d, gt.points3d)
+
+
 def test_sync_with_given_clocks_skips_recovery(scene_factory, monkeypatch):
     import gttnet.sync.method as sync_method
     from gttnet.sync import recover_clocks
