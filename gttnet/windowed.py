@@ -18,6 +18,11 @@ Placing images in time (:func:`approximate_times`):
   piecewise, in time linear in their length: the full offset search on the first 20 s, then offsets
   and clock drift from windows spread over the whole recording, so a clock-rate error (100 ppm is 60 ms,
   two frames at 30 Hz, after 10 minutes) is followed to the end (``benchmarks/bench_sync_long.py``).
+  ``sync`` windows (and ``auto``'s, once it chose ``sync`` on the first window) then solve on those
+  recording-wide clocks instead of recovering their own (re-fitting clocks in every window took about
+  40 % of a long recording's run); the stitched
+  result reports them (``clock_offsets_s`` and the timing checks). Each window's HPF prior weight is
+  cross-validated starting from the previous window's (:func:`_warm_start`).
   If clock recovery fails, images are placed at their stream's elapsed fraction, ``(rank in stream +
   0.5) / images in stream`` (:func:`approximate_times`), which assumes streams spanning the same
   recording at the same rate.
@@ -240,6 +245,57 @@ def _local_rank(rec: Reconstruction, t_local: np.ndarray) -> np.ndarray:
     return order
 
 
+#: Options of ``sync`` that shape clock recovery (the recording's clocks are recovered with them once).
+_CLOCK_OPTIONS = ("fps", "frame_times_s", "max_offset_s", "estimate_drift")
+
+
+def _recording_clocks(obs: Observations, method: str, options: dict):
+    """Clocks of the whole recording (:func:`gttnet.sync.recover_clocks`), with the method's clock options.
+
+    ``sync`` and ``auto`` windows pass ``fps`` and ``frame_times_s`` (and ``sync`` its search options);
+    other methods' options are not clock options and are left out.
+
+    Raises:
+        GttNetError: If clock recovery fails (e.g. a single camera).
+    """
+    from gttnet.sync import recover_clocks
+
+    keep = _CLOCK_OPTIONS if method in ("sync", "auto") else ()
+    return recover_clocks(obs, **{k: v for k, v in options.items() if k in keep})
+
+
+def _clock_times(obs: Observations, clocks, options: dict) -> np.ndarray:
+    """Every image's time under the recording's clocks (with ``frame_times_s`` when given), seconds, ``(N,)``."""
+    from gttnet.sync import clock_times
+
+    return clock_times(obs, clocks, frame_times_s=options.get("frame_times_s"))
+
+
+def _warm_start(method: str, opts: dict, prev: Reconstruction | None) -> dict:
+    """Options that start a window's prior-weight search at the previous window's choice.
+
+    HPF's weight (alone or as ``sync``'s solver) is cross-validated in every window; starting at the
+    neighbour's weight (``lam_start``, :func:`gttnet.baselines.highpass.reconstruct_hpf`) scores 3 weights
+    instead of 9 where the motion's character has not changed, and follows it where it has.
+    """
+    if prev is None:
+        return {}
+    if method == "hpf" and opts.get("lam") is None and "lam" in prev.info:
+        return {"lam_start": float(prev.info["lam"])}
+    lam = (prev.info.get("solver_info") or {}).get("lam")
+    if method == "sync" and prev.info.get("solver", "hpf") == "hpf" and lam is not None:
+        return {"solver_options": {**(opts.get("solver_options") or {}), "lam_start": float(lam)}}
+    return {}
+
+
+def _clock_info(clocks) -> dict:
+    """The recording's clocks in the stitched result's ``info``: offsets and the timing checks, as ``sync``'s."""
+    from gttnet.sync.method import time_checks
+
+    offsets = {str(int(c)): float(o) for c, o in zip(clocks.cameras, clocks.offset_s, strict=True)}
+    return {"clock_offsets_s": offsets, **time_checks(clocks)}
+
+
 def _auto_winner(obs: Observations, rec, options: dict) -> tuple:
     """``auto`` selects on the first window only; its winner, with its options, solves the others (linear time).
 
@@ -283,7 +339,7 @@ def reconstruct_windowed(
         The stitched reconstruction: ``points3d`` (N, J, 3), ``order`` (N,), no affinity (it would be
         ``N x N``); ``info`` holds the windows' count, length and overlap.
     """
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     spec = method_spec(method)
     check_sequencing(obs, spec)
     n = obs.n_images
@@ -297,13 +353,15 @@ def reconstruct_windowed(
         length, auto_overlap = int(window), int(window) // 4
     ov = auto_overlap if overlap is None else int(overlap)
     clock = "given"
+    clocks = None
     if times is not None:
         t_hat = np.asarray(times, dtype=np.float64)
     elif obs.sequencing == "partial":
         from gttnet.errors import GttNetError
 
         try:
-            t_hat, clock = synced_times(obs), "recovered clocks"
+            clocks = _recording_clocks(obs, method, options)
+            t_hat, clock = _clock_times(obs, clocks, options), "recovered clocks"
         except GttNetError as exc:
             log.warning("clock recovery failed (%s); windows follow each stream's elapsed fraction", exc)
             t_hat, clock = approximate_times(obs), "stream fraction"
@@ -314,7 +372,8 @@ def reconstruct_windowed(
     if t_hat.shape != (n,):
         raise ValueError(f"times must have shape ({n},), got {t_hat.shape}")
     plan = plan_windows(t_hat, length, ov)
-    t_win = time.perf_counter()
+    t_win, cpu_win = time.perf_counter(), time.process_time()
+    cpu_solve = 0.0
     from tqdm import tqdm
 
     X = np.zeros((n, obs.n_joints, 3))
@@ -331,6 +390,7 @@ def reconstruct_windowed(
     )
     done = 0
     info_auto: dict = {}
+    rec = None
     for w in range(len(plan)):
         sub, rows = subset_observations(obs, plan.window(w))
         # Per-image options (e.g. frame_times_s) follow the window's images.
@@ -338,7 +398,12 @@ def reconstruct_windowed(
             k: v[rows] if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == n else v
             for k, v in options.items()
         }
+        if clocks is not None and spec.name == "sync":
+            opts["clocks"] = clocks  # the recording's clocks: no recovery per window
+        opts.update(_warm_start(spec.name, opts, rec if w else None))
+        c0 = time.process_time()
         rec = spec.fn(sub, **opts)
+        cpu_solve += time.process_time() - c0
         if w == 0 and method == "auto":
             spec, options, info_auto = _auto_winner(obs, rec, options)
         win = plan.window(w)
@@ -366,8 +431,17 @@ def reconstruct_windowed(
         "overlap": plan.overlap,
         "clock": clock,
         "seconds_per_window": (time.perf_counter() - t_win) / len(plan),
+        # CPU seconds of this process by stage: placing the images (clocks), the windows' solves, and
+        # the rest (cutting, sub-captures, stitching)
+        "cpu_seconds": {
+            "clocks": cpu_win - cpu0,
+            "solve": cpu_solve,
+            "windows": time.process_time() - cpu_win - cpu_solve,
+        },
     }
     info.update(info_auto)
+    if clocks is not None:
+        info.update(_clock_info(clocks))
     rec = Reconstruction(
         points3d=X,
         affinity=None,

@@ -69,6 +69,18 @@ def difference_operator(n: int, order: int = 2, *, timestamp_s: np.ndarray | Non
     return sp.csr_matrix(G)
 
 
+def _prior_band(n: int, order: int, timestamp_s: np.ndarray | None) -> np.ndarray:
+    """``G^T G (x) I3`` in the upper banded storage of ``scipy.linalg.solveh_banded``, shape ``(3 order + 1, 3N)``."""
+    u = max(3 * order, 2)
+    G = difference_operator(n, order, timestamp_s=timestamp_s)
+    GtG = (G.T @ G).tocsr()
+    prior_ab = np.zeros((u + 1, 3 * n))
+    for d in range(order + 1):
+        # Entry (3n + a, 3(n + d) + a) lives in row u - 3d, column 3(n + d) + a.
+        prior_ab[u - 3 * d, 3 * d :] = np.repeat(GtG.diagonal(d)[: n - d], 3)
+    return prior_ab
+
+
 class _HighpassSystem:
     """Every joint's normal equations for one set of rays, solved for any prior weight.
 
@@ -83,10 +95,16 @@ class _HighpassSystem:
         P: Ray projectors, shape ``(N, J, 3, 3)``.
         order: Difference order.
         timestamp_s: Sorted sample times for divided differences (None: even spacing).
+        prior_ab: :func:`_prior_band` of these times, or None (built here).
     """
 
     def __init__(
-        self, centers: np.ndarray, P: np.ndarray, order: int, timestamp_s: np.ndarray | None
+        self,
+        centers: np.ndarray,
+        P: np.ndarray,
+        order: int,
+        timestamp_s: np.ndarray | None,
+        prior_ab: np.ndarray | None = None,
     ) -> None:
         n, J = P.shape[:2]
         u = max(3 * order, 2)
@@ -95,12 +113,8 @@ class _HighpassSystem:
         for a in range(3):
             for b in range(a, 3):
                 self.rays_ab[:, u - (b - a), np.arange(n) * 3 + b] = P[:, :, a, b].T
-        G = difference_operator(n, order, timestamp_s=timestamp_s)
-        GtG = (G.T @ G).tocsr()
-        self.prior_ab = np.zeros((u + 1, 3 * n))  # G^T G (x) I3, shared by every joint
-        for d in range(order + 1):
-            # Entry (3n + a, 3(n + d) + a) lives in row u - 3d, column 3(n + d) + a.
-            self.prior_ab[u - 3 * d, 3 * d :] = np.repeat(GtG.diagonal(d)[: n - d], 3)
+        # G^T G (x) I3, shared by every joint (and by every fold of a cross-validation: see _prior_band)
+        self.prior_ab = _prior_band(n, order, timestamp_s) if prior_ab is None else prior_ab
         self.rhs = np.einsum("njab,nb->jna", P, centers).reshape(J, 3 * n)
         self.pinned = np.flatnonzero(_pinned_by_rays(P, order, timestamp_s))
 
@@ -162,7 +176,11 @@ def _pinned_by_rays(P: np.ndarray, order: int, timestamp_s: np.ndarray | None) -
     span = float(s.max() - s.min()) if n > 1 else 0.0
     s = (s - s.min()) / span if span > 0 else np.zeros(n)
     B = s[:, None] ** np.arange(order)[None, :]  # (N, order)
-    N = np.einsum("na,nb,njcd->jacbd", B, B, P).reshape(P.shape[1], 3 * order, 3 * order)
+    # N[j, (a, c), (b, d)] = sum_n B[n, a] B[n, b] P[n, j, c, d], as one matrix product (an einsum of three
+    # operands loops in Python-level order and costs ten times more on a window of a long recording)
+    BB = (B[:, :, None] * B[:, None, :]).reshape(n, order * order)
+    M = (BB.T @ P.reshape(n, -1)).reshape(order, order, P.shape[1], 3, 3)
+    N = M.transpose(2, 0, 3, 1, 4).reshape(P.shape[1], 3 * order, 3 * order)
     ev = np.linalg.eigvalsh(N)
     return np.asarray(ev[:, 0] > 1e-9 * np.maximum(ev[:, -1], 1e-300), dtype=bool)
 
@@ -177,26 +195,35 @@ def _cross_validate(
     timestamp_s: np.ndarray | None = None,
     search: str = "grid",
     weight: np.ndarray | None = None,
+    start: float | None = None,
+    prior_ab: np.ndarray | None = None,
 ) -> tuple[float, dict[float, float]]:
     """Prior weight minimising the mean held-out ray distance; held-out images keep only the prior.
 
     ``search="grid"`` scores every weight of :data:`LAMBDAS`; ``"bracket"`` scores every other one, then
     the two neighbours of the best (9 of 13 weights; the score is unimodal in ``log lam`` in practice).
+    With ``start`` (e.g. the weight a neighbouring window chose), the grid weight nearest to it and its
+    two neighbours are scored, then the grid is followed downhill until the score rises: the bracket's
+    minimum wherever the score is unimodal, from 3 weights instead of 9 when the start is right.
+    ``prior_ab`` (:func:`_prior_band` of ``timestamp_s``) saves rebuilding the filter for every fold.
     """
     if search not in ("grid", "bracket"):
         raise ValueError(f"hpf: search must be 'grid' or 'bracket', got {search!r}")
     n = visible.shape[0]
     folds = image_folds(n, n_folds)
     count = max(sum(int(visible[held].sum()) for held in folds), 1)
+    if prior_ab is None:
+        prior_ab = _prior_band(n, order, timestamp_s)
+    P_all = ray_projectors(rays, visible, weight)
 
     def scores(lams: tuple[float, ...]) -> dict[float, float]:
         # Folds outer, weights inner: each fold's system is built once per call and only one is held at
         # a time; every weight's total still adds the folds in the same order.
         totals = dict.fromkeys(lams, 0.0)
         for held in folds:
-            train_vis = visible.copy()
-            train_vis[held] = False
-            system = _HighpassSystem(centers, ray_projectors(rays, train_vis, weight), order, timestamp_s)
+            P = P_all.copy()
+            P[held] = 0.0  # a held-out image's rays constrain nothing (as ray_projectors of the rest)
+            system = _HighpassSystem(centers, P, order, timestamp_s, prior_ab)
             for lam in lams:
                 X = system.solve(lam)
                 totals[lam] += float(
@@ -204,7 +231,18 @@ def _cross_validate(
                 )
         return {lam: total / count for lam, total in totals.items()}
 
-    if search == "grid":
+    if start is not None and start > 0:
+        i = int(np.argmin(np.abs(np.log(LAMBDAS) - np.log(start))))
+        cv = scores(tuple(LAMBDAS[k] for k in (i - 1, i, i + 1) if 0 <= k < len(LAMBDAS)))
+        while True:  # downhill along the grid until both neighbours of the best are scored
+            best = LAMBDAS.index(min(cv, key=cv.__getitem__))
+            more = tuple(
+                LAMBDAS[k] for k in (best - 1, best + 1) if 0 <= k < len(LAMBDAS) and LAMBDAS[k] not in cv
+            )
+            if not more:
+                break
+            cv.update(scores(more))
+    elif search == "grid":
         cv = scores(LAMBDAS)
     else:
         cv = scores(LAMBDAS[::2])
@@ -227,6 +265,7 @@ def reconstruct_hpf(
     n_folds: int = 5,
     spacing: str = "order",
     search: str = "grid",
+    lam_start: float | None = None,
 ) -> Reconstruction:
     """High-pass-filter prior: ray residuals plus ``lam * ||G X_p||^2`` along the global image order.
 
@@ -252,6 +291,9 @@ def reconstruct_hpf(
         n_folds: Folds of the cross-validation.
         spacing: ``"order"`` (even spacing) or ``"time"`` (divided differences of the timestamps).
         search: Cross-validation over every weight (``"grid"``) or a coarse-to-fine ``"bracket"``.
+        lam_start: Where the cross-validation starts (e.g. the weight the previous window of a long
+            recording chose, :func:`gttnet.windowed.reconstruct_windowed`): the nearest grid weight and
+            its neighbours, then downhill until the score rises, instead of ``search``.
 
     Returns:
         Reconstruction with the temporal chain as affinity and the time order as order.
@@ -263,14 +305,17 @@ def reconstruct_hpf(
     centers, rays, vis = obs.centers()[seq], obs.rays()[seq], obs.visible[seq]
     weight = None if obs.confidence is None else obs.weights()[seq]
     cv: dict[float, float] = {}
+    prior_ab = _prior_band(obs.n_images, order, ts)
     if lam is None:
         lam, cv = _cross_validate(
-            centers, rays, vis, n_folds=n_folds, order=order, timestamp_s=ts, search=search, weight=weight
-        )
+            centers, rays, vis, n_folds=n_folds, order=order, timestamp_s=ts, search=search, weight=weight,
+            start=lam_start, prior_ab=prior_ab,
+        )  # fmt: skip
     if not lam > 0:
         raise ValueError(f"hpf: lam must be > 0, got {lam}")
     X = np.empty((obs.n_images, obs.n_joints, 3))
-    X[seq] = fit_highpass(centers, rays, vis, lam=lam, order=order, timestamp_s=ts, weight=weight)
+    P = ray_projectors(rays, vis, weight)
+    X[seq] = _HighpassSystem(centers, P, order, ts, prior_ab).solve(lam)
     log.debug("hpf: lam=%g", lam)
     info: dict = {"lam": float(lam), "cv_ray_error_m": {f"{a:g}": b for a, b in cv.items()}}
     lost = undetermined_joints("hpf", X, obs.visible, obs.skeleton.joint_names)

@@ -6,6 +6,7 @@ import logging
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -57,6 +58,8 @@ def reconstruct_sync(
     max_offset_s: float | None = None,
     estimate_drift: bool | None = None,
     solver: str = "hpf",
+    clocks: Clocks | None = None,
+    solver_options: Mapping[str, Any] | None = None,
 ) -> Reconstruction:
     """Clock recovery (:func:`gttnet.sync.recover_clocks`) then a full-sequencing solver on the recovered times.
 
@@ -70,6 +73,10 @@ def reconstruct_sync(
         estimate_drift: Fit per-camera clock drift (None: when a stream spans over 30 s).
         solver: ``"hpf"`` (default: the most accurate full-sequencing solver of the project's evaluation)
             or ``"dct"``.
+        clocks: Clocks already recovered for these cameras (e.g. over the whole recording a window of it
+            comes from, :func:`gttnet.windowed.reconstruct_windowed`): used as they are, nothing is
+            recovered (``fps``, ``max_offset_s`` and ``estimate_drift`` are then unused).
+        solver_options: Options of the solver over :data:`SOLVERS`' (e.g. HPF's ``lam_start``).
 
     Returns:
         Reconstruction in the input's image order; ``order`` ranks the recovered times (images of cameras
@@ -82,29 +89,47 @@ def reconstruct_sync(
     if solver not in SOLVERS:
         raise ValueError(f"sync: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     t0 = time.perf_counter()
-    clocks = recover_clocks(
-        obs, fps=fps, frame_times_s=frame_times_s, max_offset_s=max_offset_s, estimate_drift=estimate_drift
-    )
+    if clocks is None:
+        clocks = recover_clocks(
+            obs,
+            fps=fps,
+            frame_times_s=frame_times_s,
+            max_offset_s=max_offset_s,
+            estimate_drift=estimate_drift,
+        )
     t1 = time.perf_counter()
-    rec = _timed_solve(obs, clocks, frame_times_s=frame_times_s, solver=solver)
+    rec = _timed_solve(obs, clocks, frame_times_s=frame_times_s, solver=solver, options=solver_options)
     return replace(rec, info={**rec.info, "sync_seconds": t1 - t0})
 
 
 def _timed_solve(
-    obs: Observations, clocks: Clocks, *, frame_times_s: np.ndarray | None, solver: str
+    obs: Observations,
+    clocks: Clocks,
+    *,
+    frame_times_s: np.ndarray | None,
+    solver: str,
+    options: Mapping[str, Any] | None = None,
 ) -> Reconstruction:
-    """The full-sequencing ``solver`` on the times ``clocks`` give; images of cameras without a clock NaN."""
-    from gttnet.methods import reconstruct
+    """The full-sequencing ``solver`` on the times ``clocks`` give; images of cameras without a clock NaN.
+
+    The solver's function is called directly: its result is an intermediate (the caller's reconstruction is
+    assessed as a whole), so neither its self-assessment nor an order from its affinity is computed.
+    """
+    from gttnet.methods import method_spec
 
     left = {int(c): why for c, why in clocks.info.get("left_out", {}).items()}
     timed = np.flatnonzero(~np.isin(obs.cam_id, list(left)))  # images of cameras with a clock
     sub = obs.take(timed) if left else obs
     ft = None if frame_times_s is None else np.asarray(frame_times_s)[timed]
     t_sub = clock_times(sub, clocks, frame_times_s=ft)
-    inner = reconstruct(apply_clocks(sub, clocks, frame_times_s=ft), solver, **SOLVERS[solver])
+    t0 = time.perf_counter()
+    opts = {**SOLVERS[solver], **(options or {})}
+    inner = method_spec(solver).fn(apply_clocks(sub, clocks, frame_times_s=ft), **opts)
+    solve_seconds = time.perf_counter() - t0
     seq = timed[np.argsort(t_sub, kind="stable")]
     X = np.full((obs.n_images, obs.n_joints, 3), np.nan)  # images without a clock: no pose
     X[seq] = inner.points3d
+    X[:, ~np.asarray(sub.visible, dtype=bool).any(axis=0)] = np.nan  # joints no timed image observes
     rest = np.setdiff1d(np.arange(obs.n_images), timed)
     rank = np.empty(obs.n_images, dtype=np.int64)
     rank[np.r_[seq, rest[np.lexsort((_frame_order(obs)[rest], obs.cam_id[rest]))]]] = np.arange(obs.n_images)
@@ -118,7 +143,7 @@ def _timed_solve(
         "timestamp_s": [None if not np.isfinite(x) else float(x) for x in t],
         "solver": solver,
         "solver_info": inner.info,
-        "solve_seconds": inner.seconds,
+        "solve_seconds": solve_seconds,
         **time_checks(clocks),
     }
     return Reconstruction(points3d=X, order=rank, info=info)

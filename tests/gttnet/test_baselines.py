@@ -167,6 +167,51 @@ def test_hpf_bracket_search_scores_a_subset_of_the_grid(scene):
         reconstruct(obs, "hpf", search="golden")
 
 
+@pytest.mark.parametrize("start", ["best", "lowest", "highest"])
+def test_hpf_search_from_a_start_walks_to_the_grids_best(scene, start):
+    """``lam_start`` (a neighbouring window's weight) scores 3 weights when right, and walks when wrong."""
+    from gttnet.baselines.highpass import LAMBDAS
+
+    obs, _ = make_view(scene, "full")
+    full = reconstruct(obs, "hpf", n_folds=3)
+    grid = full.info["cv_ray_error_m"]
+    best = min(grid, key=grid.__getitem__)
+    lam0 = {"best": float(best), "lowest": LAMBDAS[0], "highest": LAMBDAS[-1]}[start]
+    rec = reconstruct(obs, "hpf", n_folds=3, lam_start=lam0 * 1.1)  # off the grid: the nearest weight
+    local = rec.info["cv_ray_error_m"]
+    assert all(grid[k] == v for k, v in local.items())  # the same scores as the full grid
+    assert rec.info["lam"] == full.info["lam"]
+    np.testing.assert_array_equal(rec.points3d, full.points3d)
+    if start == "best" and best not in (f"{LAMBDAS[0]:g}", f"{LAMBDAS[-1]:g}"):
+        assert len(local) == 3
+
+
+def test_hpf_pinned_joints_match_the_einsum_definition():
+    """The matrix-product form of the pinned check gives the three-operand einsum's normal matrices."""
+    from gttnet.baselines._rays import ray_projectors
+    from gttnet.baselines.highpass import _pinned_by_rays
+
+    rng = np.random.default_rng(3)
+    n, J = 40, 5
+    rays = rng.normal(size=(n, J, 3))
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    vis = rng.random((n, J)) > 0.3
+    vis[:, 1] = False
+    vis[7, 1] = True  # one ray: the prior's null space is free
+    vis[:, 2] = False
+    vis[[3, 30], 2] = True  # two rays at two times: an order-2 prior's straight lines are pinned down
+    P = ray_projectors(rays, vis)
+    s = np.sort(rng.random(n))
+    for order in (1, 2, 3):
+        B = ((s - s.min()) / np.ptp(s))[:, None] ** np.arange(order)[None, :]
+        N = np.einsum("na,nb,njcd->jacbd", B, B, P).reshape(J, 3 * order, 3 * order)
+        ev = np.linalg.eigvalsh(N)
+        want = ev[:, 0] > 1e-9 * np.maximum(ev[:, -1], 1e-300)
+        got = _pinned_by_rays(P, order, s)
+        np.testing.assert_array_equal(got, want)
+        assert not got[1]
+
+
 def test_trajectory_methods_beat_pseudo(scene):
     obs, gt = make_view(scene, "full")
     base = mpjpe_mm(reconstruct(obs, "pseudo").points3d, gt.points3d)

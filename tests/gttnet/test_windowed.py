@@ -125,6 +125,76 @@ def test_partial_windows_follow_recovered_clocks(scene_factory):
     assert kendall_tau(rec.order, np.argsort(np.argsort(t_true))) > 0.85
 
 
+def test_sync_windows_solve_on_the_recordings_clocks(scene_factory, monkeypatch):
+    """Clocks are recovered once for the whole recording; every window solves on them (none re-fits)."""
+    import gttnet.sync
+    import gttnet.sync.method as sync_method
+    from gttnet.sync import recover_clocks
+
+    sample = scene_factory(n_cameras=4, n_joints=12, frames_per_camera=60, sigma_px=1.0, seed=7)
+    obs, gt = make_view(sample, "partial")
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(args[0].n_images)
+        return recover_clocks(*args, **kwargs)
+
+    monkeypatch.setattr(gttnet.sync, "recover_clocks", counted)
+    monkeypatch.setattr(sync_method, "recover_clocks", counted)
+    rec = reconstruct_windowed(obs, "sync", window=80, overlap=20, fps=30.0)
+    assert calls == [obs.n_images]  # once, over the whole recording
+    assert rec.info["windows"] >= 3 and rec.info["clock"] == "recovered clocks"
+    assert set(rec.info["clock_offsets_s"]) == {"0", "1", "2", "3"}
+    assert rec.info["cameras_left_out"] == {}
+    whole = reconstruct(obs, "sync", fps=30.0)
+    assert mpjpe_mm(rec.points3d, gt.points3d) < 1.1 * mpjpe_mm(whole.points3d, gt.points3d)
+    calls.clear()
+    auto = reconstruct_windowed(obs, "auto", window=80, overlap=20, fps=30.0)
+    assert auto.info["method_ran"] == "sync"
+    assert len(calls) == 2  # the recording's, and the first window's own when auto assesses sync there
+
+
+def test_hpf_windows_start_their_weight_search_at_the_previous_windows(scene_factory, monkeypatch):
+    """Each window after the first cross-validates HPF's weight from its neighbour's choice."""
+    import dataclasses
+
+    import gttnet.methods as methods
+
+    spec = methods.method_spec("hpf")
+    seen: list[tuple[float | None, float]] = []
+
+    def spy(obs, **kwargs):
+        rec = spec.fn(obs, **kwargs)
+        seen.append((kwargs.get("lam_start"), rec.info["lam"]))
+        return rec
+
+    monkeypatch.setitem(methods._REGISTRY, "hpf", dataclasses.replace(spec, fn=spy))
+    obs, gt = make_view(scene_factory(n_cameras=4, n_joints=8, frames_per_camera=60, seed=5), "full")
+    rec = reconstruct_windowed(obs, "hpf", window=80, overlap=20, n_folds=3)
+    assert len(seen) == rec.info["windows"] >= 3
+    assert seen[0][0] is None
+    assert [start for start, _ in seen[1:]] == [lam for _, lam in seen[:-1]]
+    fixed = reconstruct_windowed(obs, "hpf", window=80, overlap=20, lam=seen[0][1])
+    assert mpjpe_mm(rec.points3d, gt.points3d) < 1.2 * mpjpe_mm(fixed.points3d, gt.points3d)
+
+
+def test_sync_with_given_clocks_skips_recovery(scene_factory, monkeypatch):
+    import gttnet.sync.method as sync_method
+    from gttnet.sync import recover_clocks
+
+    obs, _ = make_view(scene_factory(n_cameras=3, n_joints=8, frames_per_camera=40, seed=2), "partial")
+    clocks = recover_clocks(obs, fps=30.0)
+    want = reconstruct(obs, "sync", fps=30.0)
+
+    def fail(*args, **kwargs):
+        raise AssertionError("clocks were given: nothing to recover")
+
+    monkeypatch.setattr(sync_method, "recover_clocks", fail)
+    got = reconstruct(obs, "sync", clocks=clocks)
+    np.testing.assert_array_equal(got.points3d, want.points3d)
+    assert got.info["clock_offsets_s"] == want.info["clock_offsets_s"]
+
+
 def test_a_window_that_leaves_a_joint_nan_does_not_blank_its_neighbours(scene_factory):
     """HPF leaves a joint NaN in a window that has no ray of it; overlapping windows that do still count."""
     import dataclasses
