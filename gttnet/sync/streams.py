@@ -14,16 +14,19 @@ source gives a global rank of the images, and each camera's frames are put in th
 - ``root``: the position of the skeleton's centre along the main direction it travels (walking, running:
   a periodic motion whose poses repeat but whose position does not).
 
-A wrong order leaves clocks that do not explain the images: each candidate's clocks are recovered and the
-candidate whose clock fit leaves the lowest reprojection residual (among those whose clocks cover at least
-half as many ray pairs as the best covered, and whose streams do not read as noisier than the others': a
-wrong order adds to the frame-to-frame differences the noise is read from) is kept (:func:`choose_streams`).
+A wrong order leaves clocks that do not explain the images: the candidates' clocks are recovered, the
+best-ordered streams (lowest noise estimate) first and the costly sources (a DLOE reconstruction) last, and
+the first whose clock fit leaves what right clocks leave at the capture's noise is kept at once (the rest
+are not tried: clock recovery is most of ``stream-sync``'s time); failing that, the candidate whose clock fit
+leaves the lowest reprojection residual (among those whose clocks cover at least half as many ray pairs as
+the best covered, and whose streams do not read as noisier than the others': a wrong order adds to the
+frame-to-frame differences the noise is read from) is kept (:func:`choose_streams`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -129,37 +132,66 @@ def choose_streams(
     views: Mapping[str, Observations],
     *,
     fps: float | Sequence[float] | Mapping[int, float] | None,
+    lazy: Mapping[str, Callable[[], Observations | None]] | None = None,
+    accept_rms_noise: float | None = None,
 ) -> StreamChoice:
-    """Recover the clocks of every candidate view and keep the one whose clocks explain the images best.
+    """Recover the clocks of the candidate views, cheapest evidence first, and keep the one that explains the images best.
 
-    The frame rates are checked (or, without ``fps``, estimated) on the view with the lowest noise estimate
-    (the best-ordered streams), then held for the others. Among views whose clock fit covers at least half
-    as many ray pairs as the best covered one and whose own noise estimate is within
-    :data:`MISORDERED_NOISE` times the smallest, the lowest clock residual wins.
+    The views are tried in the order of their noise estimates (the best-ordered streams first), then the
+    ``lazy`` sources in their given order (each made only when reached: e.g. DLOE's order, a whole
+    reconstruction). The frame rates are checked (or, without ``fps``, estimated) on the first view tried,
+    then held for the others. With ``accept_rms_noise``, a view whose clock fit leaves at most that multiple
+    of what right clocks leave at the capture's noise estimate so far (:func:`expected_clock_rms_px`) and
+    whose own noise estimate is within
+    :data:`MISORDERED_NOISE` times the smallest is kept at once: the sources after it are not tried
+    (``table`` marks them ``skipped``). Otherwise, among the views whose clock fit covers at least half as
+    many ray pairs as the best covered one and whose noise estimate is within :data:`MISORDERED_NOISE`
+    times the smallest, the lowest clock residual wins.
 
     Args:
         views: Candidate ``partial`` views of one capture, by source name.
         fps: Nominal frame rates, as :func:`gttnet.sync.recover_clocks` takes them.
+        lazy: Further sources by name, each a function making its ``partial`` view (None: no view).
+        accept_rms_noise: The multiple of :func:`expected_clock_rms_px` at which a view is kept at once; None
+            tries every source.
 
     Returns:
         The :class:`StreamChoice`.
     """
     table: dict[str, dict] = {}
-    noise = {}
-    for name, v in views.items():
+    noise: dict[str, float | None] = {}
+    made: dict[str, Observations] = {}
+
+    def measure(name: str, v: Observations) -> None:
         assert v.stream_index is not None  # partial views
+        made[name] = v
         noise[name] = stream_noise_px(v.keypoints_px, v.visible, v.cam_id, v.stream_index)
         table[name] = {"noise_px": noise[name]}
-    measured = [s for s in noise.values() if s is not None]
-    sigma = min(measured) if measured else None
-    order = sorted(views, key=lambda n: _or_inf(noise[n]))
+
+    def sigma_now() -> float | None:
+        measured = [s for s in noise.values() if s is not None]
+        return min(measured) if measured else None
+
+    for name, v in views.items():
+        measure(name, v)
+    pending: list[tuple[str, Callable[[], Observations | None] | None]] = [
+        (n, None) for n in sorted(views, key=lambda n: _or_inf(noise[n]))
+    ]
+    pending += [(n, make) for n, make in (lazy or {}).items() if n not in views]
     clocks: dict[str, Clocks] = {}
     rates: float | Sequence[float] | Mapping[int, float] | None = fps
     rate_info = None
-    for name in order:
+    accepted = None
+    for i, (name, make) in enumerate(pending):
+        if make is not None:
+            lazy_view = make()
+            if lazy_view is None:
+                table[name] = {"error": "no order"}
+                continue
+            measure(name, lazy_view)
         first = rate_info is None
         try:
-            cl = recover_clocks(views[name], fps=rates, check_rates=first)
+            cl = recover_clocks(made[name], fps=rates, check_rates=first)
         except GttNetError as exc:
             table[name]["error"] = str(exc)
             continue
@@ -168,19 +200,36 @@ def choose_streams(
             rates = {int(c): float(r) for c, r in zip(cl.cameras, cl.rate_hz, strict=True)}
         clocks[name] = cl
         table[name].update({"rms_px": cl.info.get("rms_px"), "n_residuals": cl.info.get("n_residuals", 0)})
+        sigma = sigma_now()
+        rms = cl.info.get("rms_px")
+        if (
+            accept_rms_noise is not None
+            and sigma is not None
+            and rms is not None
+            and rms <= accept_rms_noise * expected_clock_rms_px(sigma)
+            and _or_inf(noise[name]) <= MISORDERED_NOISE * sigma
+        ):
+            accepted = name
+            for rest, _ in pending[i + 1 :]:
+                table[rest] = {**table.get(rest, {}), "skipped": f"{name}'s clocks explain the images"}
+            break
+    sigma = sigma_now()
     if not clocks:
         return StreamChoice(None, None, None, sigma, table)
-    most = max(table[n]["n_residuals"] for n in clocks)
-    fair = [
-        n
-        for n in clocks
-        if table[n]["n_residuals"] >= 0.5 * most
-        and table[n]["rms_px"] is not None
-        and _or_inf(noise[n]) <= MISORDERED_NOISE * _or_inf(sigma)
-    ]
-    best = min(fair or list(clocks), key=lambda n: table[n]["rms_px"] or np.inf)
+    if accepted is not None:
+        best = accepted
+    else:
+        most = max(table[n]["n_residuals"] for n in clocks)
+        fair = [
+            n
+            for n in clocks
+            if table[n]["n_residuals"] >= 0.5 * most
+            and table[n]["rms_px"] is not None
+            and _or_inf(noise[n]) <= MISORDERED_NOISE * _or_inf(sigma)
+        ]
+        best = min(fair or list(clocks), key=lambda n: table[n]["rms_px"] or np.inf)
     cl = clocks[best]
     if rate_info is not None:  # the rates were checked on another view: report that check
         cl = replace(cl, info={**cl.info, "rates": rate_info})
     log.info("stream-sync: order sources %s; kept %s", table, best)
-    return StreamChoice(best, views[best], cl, sigma, table)
+    return StreamChoice(best, made[best], cl, sigma, table)
