@@ -27,7 +27,7 @@ from gttdata.capture.views import Observations
 from gttnet.errors import GttNetError
 from gttnet.methods import Reconstruction, register_method
 
-__all__ = ["STOP_EXCESS", "STOP_HOLDOUT", "candidates", "decisive", "reconstruct_auto"]
+__all__ = ["ORDER_METHODS", "STOP_EXCESS", "STOP_HOLDOUT", "candidates", "decisive", "reconstruct_auto"]
 
 log = logging.getLogger(__name__)
 
@@ -196,20 +196,51 @@ def candidates(
     yield "dloe", {}
 
 
-def decisive(quality: Mapping[str, Any]) -> bool:
+def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     """Whether a candidate's self-assessment leaves nothing to gain from trying the others.
 
     Its residual is within :data:`STOP_EXCESS` of the capture's measured noise, its held-out error
     within :data:`STOP_HOLDOUT` of the noise at the joints' depth (thresholds relative to the capture's
-    own noise, never fixed pixels) and every image without observations has its moment (no blind camera
-    left to place).
+    own noise, never fixed pixels) and every image without observations has its moment: none is left, or,
+    with timestamps (``timed``), those images sit within :data:`STOP_HOLDOUT` times the noise of the time
+    interpolation of their observed neighbours (``blind_mm``; nothing else can place them: the less
+    informed candidates ignore the timestamps).
     """
-    if quality.get("sigma_px") is None or (quality.get("blind_fraction") or 0.0) > 0.0:
+    if quality.get("sigma_px") is None:
         return False
+    if (quality.get("blind_fraction") or 0.0) > 0.0:
+        blind_mm, noise_mm = quality.get("blind_mm"), quality.get("noise_mm")
+        if (
+            not timed
+            or blind_mm is None
+            or noise_mm is None
+            or float(blind_mm) > STOP_HOLDOUT * float(noise_mm)
+        ):
+            return False
     ex, hold = quality.get("excess"), quality.get("holdout_ratio")
     if ex is None or hold is None:
         return False
     return float(ex) <= STOP_EXCESS and float(hold) <= STOP_HOLDOUT
+
+
+#: Candidates whose reconstructions ``stream-sync`` uses for its camera streams (``order_recs``): made once,
+#: by whichever needs them first, and reused by the other.
+ORDER_METHODS = ("gttnet", "dloe")
+
+
+def _remaining(obs: Observations, tried: Sequence[str]) -> list[str]:
+    """The candidates after ``tried``, listed without loading torch: ``gttnet`` is checked only if loaded."""
+    import sys
+
+    rest = {"full": ["hpf", "sync"], "partial": ["sync"], "none": []}[obs.sequencing]
+    if "gttnet.model.inference" in sys.modules:
+        from gttnet.sync.method import order_free_fallback
+
+        learned = ["gttnet"] if order_free_fallback(obs) == "gttnet" else []
+    else:
+        learned = ["gttnet (where a bundled model fits the skeleton)"]
+    rest += learned + (["stream-sync", "dloe", "pseudo"] if obs.sequencing == "none" else ["dloe"])
+    return [n for n in rest if n not in tried]
 
 
 @register_method(
@@ -225,6 +256,10 @@ def reconstruct_auto(
 ) -> Reconstruction:
     """Select among :func:`candidates` by their self-assessment (:mod:`gttnet.quality`).
 
+    Work is shared between candidates: ``stream-sync`` takes its camera streams from the GTT-Net
+    reconstruction already made and makes DLOE's only when the cheaper order sources give no right clocks;
+    a DLOE reconstruction it made is the ``dloe`` candidate (not made twice).
+
     Args:
         obs: Observations of any sequencing condition.
         fps: Nominal per-camera rates, passed to the clock-recovering candidates.
@@ -232,54 +267,69 @@ def reconstruct_auto(
 
     Returns:
         The chosen candidate's reconstruction; ``info["method_ran"]`` names it and ``info["auto"]`` holds
-        ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, or ``error``
-        for one that could not run) and ``why``.
+        ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, and ``reused``
+        for one another candidate made; ``error`` for one that could not run; ``skipped`` with the reason for
+        one not run) and ``why``.
     """
     from gttnet.methods import reconstruct
 
     tried: list[dict[str, Any]] = []
     recs: list[Reconstruction] = []
+    made: dict[str, Reconstruction] = {}  # order-source reconstructions, shared with stream-sync
     why = ""
     least = MIN_TRIED.get(obs.sequencing, 1)
     for name, options in candidates(obs, fps=fps, frame_times_s=frame_times_s):
         t0 = time.perf_counter()
+        reused = name in made
+        if name == "stream-sync":
+            options = {**options, "order_recs": made}
         try:
-            rec = reconstruct(obs, name, **options)
+            rec = made[name] if reused else reconstruct(obs, name, **options)
         except GttNetError as exc:  # e.g. a camera with too few images for clock recovery
             log.info("auto: %s cannot run (%s)", name, exc)
             tried.append({"method": name, "error": str(exc), "seconds": round(time.perf_counter() - t0, 4)})
             continue
+        if name in ORDER_METHODS:
+            made[name] = rec
         q = rec.info.get("quality", {})
-        tried.append(
-            {
-                "method": name,
-                "expected_error_mm": q.get("expected_error_mm"),
-                "seconds": round(time.perf_counter() - t0, 4),
-                "reasons": list(q.get("reasons", [])),
-            }
-        )
+        entry = {
+            "method": name,
+            "expected_error_mm": q.get("expected_error_mm"),
+            "seconds": round(time.perf_counter() - t0, 4),
+            "reasons": list(q.get("reasons", [])),
+        }
+        if reused:
+            entry["reused"] = (
+                f"made by stream-sync for its camera streams ({rec.seconds:.2f} s, counted there)"
+            )
+        tried.append(entry)
         recs.append(rec)
         if obs.sequencing == "none":  # with real timing the informed candidates are not second-guessed
-            recs = _common_noise(obs, recs, [t for t in tried if "error" not in t])
-            recs = _agreement(recs, [t for t in tried if "error" not in t])
+            rows = [t for t in tried if "error" not in t and "skipped" not in t]
+            recs = _common_noise(obs, recs, rows)
+            recs = _agreement(recs, rows)
         best = _pick(recs, obs.sequencing)
-        if len(recs) >= least and decisive(best.info["quality"]):
+        if len(recs) >= least and decisive(best.info["quality"], timed=obs.sequencing == "full"):
             bq = best.info["quality"]
             why = (
                 f"residual {bq.get('residual_px')} px at the capture's noise ({bq.get('sigma_px')} px), held-out "
                 f"error {bq.get('holdout_ratio')}x the noise: decisive, the rest not tried"
             )
+            ran_now = best.info.get("method_ran", best.method)
+            for rest in _remaining(obs, [t["method"] for t in tried]):
+                tried.append({"method": rest, "skipped": f"{ran_now}'s self-assessment was decisive"})
             break
     if not recs:
         raise GttNetError(
             "auto: no candidate could reconstruct the input: "
-            + "; ".join(f"{t['method']}: {t['error']}" for t in tried)
+            + "; ".join(f"{t['method']}: {t['error']}" for t in tried if "error" in t)
         )
     best = _pick(recs, obs.sequencing)
     ran = best.info.get("method_ran", best.method)
+    n_run = sum(1 for t in tried if "skipped" not in t)
     pick = (
         f"{ran}: the smallest expected error ({best.info['quality']['expected_error_mm']} mm) of the "
-        f"{len(tried)} candidates tried"
+        f"{n_run} candidates tried"
     )
     why = pick if not why else f"{pick}; {why}"
     auto = {"ran": ran, "candidates": tried, "why": why}

@@ -86,8 +86,12 @@ def test_auto_stops_at_a_decisive_candidate_and_reports_its_choice():
     rec = reconstruct(obs, "auto", fps=30.0)
     a = rec.info["auto"]
     assert a["ran"] == rec.info["method_ran"] == "sync"
-    assert [c["method"] for c in a["candidates"]] == ["sync"] and "decisive" in a["why"]
+    ran = [c["method"] for c in a["candidates"] if "skipped" not in c]
+    assert ran == ["sync"] and "decisive" in a["why"]
     assert {"method", "expected_error_mm", "seconds", "reasons"} <= set(a["candidates"][0])
+    skipped = [c for c in a["candidates"] if "skipped" in c]  # the rest is listed, each with its reason
+    assert [c["method"] for c in skipped][-1] == "dloe" and len(skipped) == 2
+    assert all("sync's self-assessment was decisive" in c["skipped"] for c in skipped)
 
 
 @pytest.mark.slow
