@@ -26,6 +26,7 @@ frame-to-frame differences the noise is read from) is kept (:func:`choose_stream
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -118,7 +119,9 @@ class StreamChoice:
         clocks: Its recovered clocks (None with ``source``).
         noise_px: The capture's 2-D noise estimate, pixels: the smallest over the sources' streams (a wrong
             order only adds to the second differences it is read from), or None.
-        table: Per source: ``rms_px`` (clock fit residual), ``noise_px``, ``n_residuals`` or ``error``.
+        table: Per source: ``rms_px`` (clock fit residual), ``noise_px``, ``n_residuals`` and ``seconds`` (its
+            clock recovery), or ``error``, or ``same_as`` (a source with the same streams), or ``skipped``
+            (with the reason).
     """
 
     source: str | None
@@ -128,32 +131,67 @@ class StreamChoice:
     table: dict = field(default_factory=dict)
 
 
+def _streams(v: Observations) -> np.ndarray:
+    """Each image's frame index within its camera (``partial`` views carry it)."""
+    assert v.stream_index is not None
+    return np.asarray(v.stream_index)
+
+
+def _smallest(noise: Mapping[str, float | None]) -> float | None:
+    """The capture's noise estimate: the smallest over the streams measured (a wrong order only adds)."""
+    measured = [s for s in noise.values() if s is not None]
+    return min(measured) if measured else None
+
+
+def _within(rms: float | None, noise: Mapping[str, float | None], name: str, limit: float | None) -> bool:
+    """Whether clocks leaving ``rms`` px are within ``limit`` x the expected RMS, ``name``'s streams not noisier."""
+    sigma = _smallest(noise)
+    if limit is None or sigma is None or rms is None:
+        return False
+    return rms <= limit * expected_clock_rms_px(sigma) and _or_inf(noise[name]) <= MISORDERED_NOISE * sigma
+
+
+def _lowest_fair(names: list[str], table: dict[str, dict], noise: Mapping[str, float | None], sigma) -> str:
+    """The lowest clock residual among ``names`` covering half the most ray pairs, streams not misordered."""
+    most = max(table[n]["n_residuals"] for n in names)
+    fair = [
+        n
+        for n in names
+        if table[n]["n_residuals"] >= 0.5 * most
+        and table[n]["rms_px"] is not None
+        and _or_inf(noise[n]) <= MISORDERED_NOISE * _or_inf(sigma)
+    ]
+    return min(fair or names, key=lambda n: table[n]["rms_px"] or np.inf)
+
+
 def choose_streams(
     views: Mapping[str, Observations],
     *,
     fps: float | Sequence[float] | Mapping[int, float] | None,
     lazy: Mapping[str, Callable[[], Observations | None]] | None = None,
     accept_rms_noise: float | None = None,
+    lazy_rms_noise: float | None = None,
 ) -> StreamChoice:
     """Recover the clocks of the candidate views, cheapest evidence first, and keep the one that explains the images best.
 
     The views are tried in the order of their noise estimates (the best-ordered streams first), then the
     ``lazy`` sources in their given order (each made only when reached: e.g. DLOE's order, a whole
-    reconstruction). The frame rates are checked (or, without ``fps``, estimated) on the first view tried,
-    then held for the others. With ``accept_rms_noise``, a view whose clock fit leaves at most that multiple
-    of what right clocks leave at the capture's noise estimate so far (:func:`expected_clock_rms_px`) and
-    whose own noise estimate is within
-    :data:`MISORDERED_NOISE` times the smallest is kept at once: the sources after it are not tried
-    (``table`` marks them ``skipped``). Otherwise, among the views whose clock fit covers at least half as
-    many ray pairs as the best covered one and whose noise estimate is within :data:`MISORDERED_NOISE`
-    times the smallest, the lowest clock residual wins.
+    reconstruction). A view whose streams are those of a view already tried is not tried again (``same_as``).
+    The frame rates are checked (or, without ``fps``, estimated) on the first view tried, then held for the
+    others. Clock fits are judged by their RMS over what right clocks leave at the capture's noise estimate
+    so far (:func:`expected_clock_rms_px`), among views whose own noise estimate is within
+    :data:`MISORDERED_NOISE` times the smallest: a view at most ``accept_rms_noise`` is kept at once (the
+    sources after it are marked ``skipped``), and the lazy sources are made only when no view so far is at
+    most ``lazy_rms_noise``. Otherwise, among the views whose clock fit covers at least half as many ray
+    pairs as the best covered one and whose noise estimate is within :data:`MISORDERED_NOISE` times the
+    smallest, the lowest clock residual wins.
 
     Args:
         views: Candidate ``partial`` views of one capture, by source name.
         fps: Nominal frame rates, as :func:`gttnet.sync.recover_clocks` takes them.
         lazy: Further sources by name, each a function making its ``partial`` view (None: no view).
-        accept_rms_noise: The multiple of :func:`expected_clock_rms_px` at which a view is kept at once; None
-            tries every source.
+        accept_rms_noise: The ratio at which a view is kept at once; None tries every source.
+        lazy_rms_noise: The ratio at which no lazy source is made; None makes them whenever reached.
 
     Returns:
         The :class:`StreamChoice`.
@@ -161,6 +199,7 @@ def choose_streams(
     table: dict[str, dict] = {}
     noise: dict[str, float | None] = {}
     made: dict[str, Observations] = {}
+    clocks: dict[str, Clocks] = {}
 
     def measure(name: str, v: Observations) -> None:
         assert v.stream_index is not None  # partial views
@@ -168,9 +207,8 @@ def choose_streams(
         noise[name] = stream_noise_px(v.keypoints_px, v.visible, v.cam_id, v.stream_index)
         table[name] = {"noise_px": noise[name]}
 
-    def sigma_now() -> float | None:
-        measured = [s for s in noise.values() if s is not None]
-        return min(measured) if measured else None
+    def within(name: str, limit: float | None) -> bool:
+        return _within(table[name].get("rms_px"), noise, name, limit)
 
     for name, v in views.items():
         measure(name, v)
@@ -178,56 +216,47 @@ def choose_streams(
         (n, None) for n in sorted(views, key=lambda n: _or_inf(noise[n]))
     ]
     pending += [(n, make) for n, make in (lazy or {}).items() if n not in views]
-    clocks: dict[str, Clocks] = {}
     rates: float | Sequence[float] | Mapping[int, float] | None = fps
     rate_info = None
     accepted = None
+    tried: list[str] = []
     for i, (name, make) in enumerate(pending):
         if make is not None:
-            lazy_view = make()
+            good = [n for n in clocks if within(n, lazy_rms_noise)]
+            lazy_view = None if good else make()
             if lazy_view is None:
-                table[name] = {"error": "no order"}
+                why = f"{good[0]}'s clocks are within {lazy_rms_noise}x the expected" if good else ""
+                table[name] = {"skipped": why} if good else {"error": "no order"}
                 continue
             measure(name, lazy_view)
+        same = [n for n in tried if np.array_equal(_streams(made[n]), _streams(made[name]))]
+        tried.append(name)
+        if same:
+            table[name]["same_as"] = same[0]
+            continue
         first = rate_info is None
+        t0 = time.perf_counter()
         try:
             cl = recover_clocks(made[name], fps=rates, check_rates=first)
         except GttNetError as exc:
             table[name]["error"] = str(exc)
             continue
+        finally:
+            table[name]["seconds"] = round(time.perf_counter() - t0, 3)
         if first:
             rate_info = cl.info.get("rates")
             rates = {int(c): float(r) for c, r in zip(cl.cameras, cl.rate_hz, strict=True)}
         clocks[name] = cl
         table[name].update({"rms_px": cl.info.get("rms_px"), "n_residuals": cl.info.get("n_residuals", 0)})
-        sigma = sigma_now()
-        rms = cl.info.get("rms_px")
-        if (
-            accept_rms_noise is not None
-            and sigma is not None
-            and rms is not None
-            and rms <= accept_rms_noise * expected_clock_rms_px(sigma)
-            and _or_inf(noise[name]) <= MISORDERED_NOISE * sigma
-        ):
+        if within(name, accept_rms_noise):
             accepted = name
             for rest, _ in pending[i + 1 :]:
                 table[rest] = {**table.get(rest, {}), "skipped": f"{name}'s clocks explain the images"}
             break
-    sigma = sigma_now()
+    sigma = _smallest(noise)
     if not clocks:
         return StreamChoice(None, None, None, sigma, table)
-    if accepted is not None:
-        best = accepted
-    else:
-        most = max(table[n]["n_residuals"] for n in clocks)
-        fair = [
-            n
-            for n in clocks
-            if table[n]["n_residuals"] >= 0.5 * most
-            and table[n]["rms_px"] is not None
-            and _or_inf(noise[n]) <= MISORDERED_NOISE * _or_inf(sigma)
-        ]
-        best = min(fair or list(clocks), key=lambda n: table[n]["rms_px"] or np.inf)
+    best = accepted if accepted is not None else _lowest_fair(list(clocks), table, noise, sigma)
     cl = clocks[best]
     if rate_info is not None:  # the rates were checked on another view: report that check
         cl = replace(cl, info={**cl.info, "rates": rate_info})
