@@ -112,12 +112,12 @@ def _scalar(v):
     return None if v is None or not np.isfinite(v) else round(float(v), 4)
 
 
-def run_capture(sample, cell: str, *, with_auto: bool = True) -> list[dict]:
+def run_capture(sample, cell: str, *, with_auto: bool = True, seqs=SEQS) -> list[dict]:
     """One row per (sequencing, method) of one capture; ``auto`` rows name the pick and the candidates."""
     from gttnet.auto import candidates
 
     rows = []
-    for seq in SEQS:
+    for seq in seqs:
         obs, gt, timing = _cell_view(sample, seq, cell)
         for name, options in candidates(obs, **timing):
             t0 = time.perf_counter()
@@ -168,14 +168,14 @@ def run_capture(sample, cell: str, *, with_auto: bool = True) -> list[dict]:
     return rows
 
 
-def collect(recipes: list[tuple[str, str]], split: str, n_seq: int, with_auto: bool) -> list[dict]:
+def collect(recipes: list[tuple[str, str]], split: str, n_seq: int, with_auto: bool, seqs=SEQS) -> list[dict]:
     """Rows of every capture of every (cell, recipe path)."""
     rows = []
     for cell, path in recipes:
         recipe = load_recipe(path, [])
         for i in range(n_seq):
             sample = build_sample(recipe, split, i)[0]
-            rows += run_capture(sample, cell, with_auto=with_auto)
+            rows += run_capture(sample, cell, with_auto=with_auto, seqs=seqs)
     return rows
 
 
@@ -313,6 +313,7 @@ def main() -> None:
     ap.add_argument("--split", default="test")
     ap.add_argument("--n-seq", type=int, default=3, help="captures per cell")
     ap.add_argument("--no-auto", action="store_true", help="candidates only (calibration captures)")
+    ap.add_argument("--seqs", default=",".join(SEQS), help="comma-separated sequencing conditions to run")
     ap.add_argument("--rows", default="", help="JSONL file: written after a run, read with --table (a,b,...)")
     ap.add_argument("--table", action="store_true", help="print the table of --rows without running")
     ap.add_argument("--fit", default="", help="fit the calibration on this JSONL and print it")
@@ -332,7 +333,7 @@ def main() -> None:
     else:
         names = args.cells.split(",") if args.cells else sorted(p.stem for p in OOD.glob("*.yaml"))
         recipes = [(c, str(OOD / f"{c}.yaml")) for c in names]
-    rows = collect(recipes, args.split, args.n_seq, not args.no_auto)
+    rows = collect(recipes, args.split, args.n_seq, not args.no_auto, tuple(args.seqs.split(",")))
     if args.rows:
         Path(args.rows).parent.mkdir(parents=True, exist_ok=True)
         Path(args.rows).write_text("".join(json.dumps(r) + "\n" for r in rows))

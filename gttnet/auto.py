@@ -27,7 +27,16 @@ from gttdata.capture.views import Observations
 from gttnet.errors import GttNetError
 from gttnet.methods import Reconstruction, register_method
 
-__all__ = ["ORDER_METHODS", "STOP_EXCESS", "STOP_HOLDOUT", "candidates", "decisive", "reconstruct_auto"]
+__all__ = [
+    "ORDER_METHODS",
+    "TIMED",
+    "STOP_EXCESS",
+    "STOP_HOLDOUT",
+    "candidates",
+    "clocks_rejected",
+    "decisive",
+    "reconstruct_auto",
+]
 
 log = logging.getLogger(__name__)
 
@@ -142,8 +151,25 @@ def _common_noise(
 PREFER_INFORMED = {"full": 1.5, "partial": 1.5, "none": 1.0}
 
 
+def clocks_rejected(rec: Reconstruction) -> str | None:
+    """Why ``rec``'s clocks, recovered on estimated streams, fail ``stream-sync``'s gate; None if they pass.
+
+    The gate is relative to the capture's noise (:data:`gttnet.sync.method.STREAM_SYNC_MAX_RMS_NOISE` times
+    the clock RMS right clocks leave there): clocks beyond it rest on a wrong order or rate, and their
+    reconstruction can still reproject well (the images are explained by wrong moments).
+    """
+    rms, gate = rec.info.get("clock_rms_px"), rec.info.get("gate_px")
+    if not rec.info.get("streams_estimated") or rms is None or gate is None or float(rms) <= float(gate):
+        return None
+    return f"its clocks leave {float(rms):.2f} px RMS, above the gate ({float(gate):.2f} px at the capture's noise)"
+
+
 def _pick(recs: list[Reconstruction], sequencing: str) -> Reconstruction:
-    """The candidate with the smallest expected error, the less informed ones' taken ``PREFER_INFORMED`` times."""
+    """The candidate with the smallest expected error, the less informed ones' taken ``PREFER_INFORMED`` times.
+
+    A candidate whose clocks fail the gate (:func:`clocks_rejected`) is picked only when nothing else ran.
+    """
+    recs = [r for r in recs if clocks_rejected(r) is None] or recs
     top = max(INFORMED.get(r.method, 0) for r in recs)
     factor = PREFER_INFORMED.get(sequencing, 1.0)
 
@@ -201,28 +227,28 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
 
     Its residual is within :data:`STOP_EXCESS` of the capture's measured noise, its held-out error
     within :data:`STOP_HOLDOUT` of the noise at the joints' depth (thresholds relative to the capture's
-    own noise, never fixed pixels) and every image without observations has its moment: none is left, or,
-    with timestamps (``timed``), those images sit within :data:`STOP_HOLDOUT` times the noise of the time
-    interpolation of their observed neighbours (``blind_mm``; nothing else can place them: the less
-    informed candidates ignore the timestamps).
+    own noise, never fixed pixels), and every image without observations (a blind camera) is either left
+    without a pose (a camera no clock could be recovered for, reported as left out: ``blind_mm`` 0) or
+    placed by its timestamp (``timed``: the candidate solves on the given timestamps). No other candidate
+    has evidence to place such images better: the less informed ones can only guess where in the motion
+    they belong.
     """
     if quality.get("sigma_px") is None:
         return False
-    if (quality.get("blind_fraction") or 0.0) > 0.0:
-        blind_mm, noise_mm = quality.get("blind_mm"), quality.get("noise_mm")
-        if (
-            not timed
-            or blind_mm is None
-            or noise_mm is None
-            or float(blind_mm) > STOP_HOLDOUT * float(noise_mm)
-        ):
-            return False
+    if (
+        (quality.get("blind_fraction") or 0.0) > 0.0
+        and not timed
+        and float(quality.get("blind_mm") or 0.0) > 0.0
+    ):
+        return False
     ex, hold = quality.get("excess"), quality.get("holdout_ratio")
     if ex is None or hold is None:
         return False
     return float(ex) <= STOP_EXCESS and float(hold) <= STOP_HOLDOUT
 
 
+#: Candidates that solve on the given timestamps (every other one recovers or ignores the timing).
+TIMED = ("hpf",)
 #: Candidates whose reconstructions ``stream-sync`` uses for its camera streams (``order_recs``): made once,
 #: by whichever needs them first, and reused by the other.
 ORDER_METHODS = ("gttnet", "dloe")
@@ -267,9 +293,9 @@ def reconstruct_auto(
 
     Returns:
         The chosen candidate's reconstruction; ``info["method_ran"]`` names it and ``info["auto"]`` holds
-        ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, and ``reused``
-        for one another candidate made; ``error`` for one that could not run; ``skipped`` with the reason for
-        one not run) and ``why``.
+        ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, ``reused`` for
+        one another candidate made, ``not_picked`` for clocks that fail the gate (:func:`clocks_rejected`);
+        ``error`` for one that could not run; ``skipped`` with the reason for one not run) and ``why``.
     """
     from gttnet.methods import reconstruct
 
@@ -298,6 +324,9 @@ def reconstruct_auto(
             "seconds": round(time.perf_counter() - t0, 4),
             "reasons": list(q.get("reasons", [])),
         }
+        rejected = clocks_rejected(rec)
+        if rejected is not None:
+            entry["not_picked"] = f"while another candidate ran: {rejected}"
         if reused:
             entry["reused"] = (
                 f"made by stream-sync for its camera streams ({rec.seconds:.2f} s, counted there)"
@@ -309,7 +338,8 @@ def reconstruct_auto(
             recs = _common_noise(obs, recs, rows)
             recs = _agreement(recs, rows)
         best = _pick(recs, obs.sequencing)
-        if len(recs) >= least and decisive(best.info["quality"], timed=obs.sequencing == "full"):
+        timed = obs.sequencing == "full" and best.method in TIMED
+        if len(recs) >= least and decisive(best.info["quality"], timed=timed):
             bq = best.info["quality"]
             why = (
                 f"residual {bq.get('residual_px')} px at the capture's noise ({bq.get('sigma_px')} px), held-out "
