@@ -102,3 +102,23 @@ def test_auto_without_sequencing_makes_each_candidate_once_and_shares_the_order_
         assert ("skipped" in c) or ("error" in c) or c["expected_error_mm"] is not None
         if "reused" in c:  # made by stream-sync for its streams: no second run
             assert c["method"] == "dloe" and c["seconds"] < 0.05
+
+
+def test_stream_sync_fits_clocks_once_per_distinct_streams(mixed, calls):
+    """Two sources giving the same streams (GTT-Net's order is often the pose graph's) cost one clock fit."""
+    obs, _ = make_view(mixed, "none")
+    d = _inner(obs, "dloe")
+    given = {"dloe": d, "gttnet": replace(d, method="gttnet")}  # the same order under two names
+    rec = _inner(obs, "stream-sync", fps=RATES, order_sources=("dloe", "gttnet"), order_recs=given)
+    table = rec.info["order_sources"]
+    assert table["gttnet"]["same_as"] == "dloe" and "rms_px" not in table["gttnet"]
+    assert calls["dloe"] == 0  # given, not made again
+
+
+def test_dloe_is_not_run_once_gttnet_has(calls):
+    """At 2 px sync is not decisive on the toy motion, so the order-free candidates are tried: GTT-Net only."""
+    obs, _ = make_view(_capture((0.0, 0.4, 0.9), (30.0, 30.0, 30.0), end_s=3.0, sigma_px=2.0), "partial")
+    rec = _inner(obs, "auto", fps=30.0)
+    tried = [c["method"] for c in rec.info["auto"]["candidates"] if "skipped" not in c]
+    assert tried == ["sync", "gttnet"] and calls["dloe"] == 0
+    assert _skipped(rec) == {"dloe": "gttnet ran: dloe does not improve on it"}
