@@ -6,8 +6,9 @@ camera's frame order clock recovery, then the order-free ones; with neither the 
 bundled one fits the skeleton (the cheapest), ``stream-sync`` (streams ordered by pose, clocks recovered),
 DLOE and the pseudo-triangulation. Work is shared: ``stream-sync`` takes its camera streams from the
 GTT-Net reconstruction already made, and makes DLOE's only when the cheaper order sources give no clocks
-within its gate; that DLOE reconstruction is then the ``dloe`` candidate, not made again. DLOE and the
-pseudo-triangulation are not run once GTT-Net (or, for the latter, DLOE) has (:data:`SUBSUMED_BY`).
+within its gate; where GTT-Net cannot run, that DLOE reconstruction is the ``dloe`` candidate, not made
+again. DLOE and the pseudo-triangulation are not candidates once GTT-Net (or, for the latter, DLOE) has
+run (:data:`SUBSUMED_BY`).
 
 Each reconstruction carries its self-assessment (:mod:`gttnet.quality`, ``info["quality"]``), raised
 without sequencing where ``stream-sync`` and an order-free candidate disagree by more than their expected
@@ -236,13 +237,13 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     return float(ex) <= STOP_EXCESS and float(hold) <= STOP_HOLDOUT
 
 
-#: Candidates not run once one of the listed ones has (unless already made): DLOE is GTT-Net's solve on a
+#: Candidates not run once one of the listed ones has (nor kept when already made): DLOE is GTT-Net's solve on a
 #: hand-made instead of a learned affinity, and the pseudo-triangulation is where both start. On the ``val``
 #: half of the out-of-distribution cells (``benchmarks/bench_auto.py --split val``) DLOE never beat GTT-Net
 #: without sequencing or with each camera's frame order, and the pseudo-triangulation beat neither, while
-#: DLOE took up to 12 s (5 px walks with missing joints) against GTT-Net's 0.5. They still run where GTT-Net
-#: cannot (no bundled model for the skeleton, or an error), and a DLOE that ``stream-sync`` made for its
-#: camera streams is a candidate at no cost.
+#: DLOE took up to 12 s (5 px walks with missing joints) against GTT-Net's 0.5; a DLOE that ``stream-sync``
+#: made for its camera streams, a candidate at no cost, was picked once (16.2 mm where GTT-Net gave 13.6). They
+#: still run where GTT-Net cannot (no bundled model for the skeleton, or an error).
 SUBSUMED_BY = {"dloe": ("gttnet",), "pseudo": ("gttnet", "dloe")}
 #: Candidates that solve on the given timestamps (every other one recovers or ignores the timing).
 TIMED = ("hpf",)
@@ -304,8 +305,11 @@ def reconstruct_auto(
         reused = name in made
         done = [t["method"] for t in tried if "expected_error_mm" in t]
         covered = [m for m in SUBSUMED_BY.get(name, ()) if m in done]
-        if covered and not reused:
-            tried.append({"method": name, "skipped": f"{covered[0]} ran: {name} does not improve on it"})
+        if covered:
+            why = f"{covered[0]} ran: {name} does not improve on it"
+            tried.append(
+                {"method": name, "skipped": why + (" (made for stream-sync's streams)" if reused else "")}
+            )
             continue
         t0 = time.perf_counter()
         if name == "stream-sync":
