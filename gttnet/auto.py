@@ -249,7 +249,7 @@ SUBSUMED_BY = {"dloe": ("gttnet",), "pseudo": ("gttnet", "dloe")}
 TIMED = ("hpf",)
 #: Candidates whose reconstructions ``stream-sync`` uses for its camera streams (``order_recs``): made once,
 #: by whichever needs them first, and reused by the other.
-ORDER_METHODS = ("gttnet", "dloe")
+ORDER_METHODS = ("gttnet", "dloe", "pseudo")
 
 
 def _remaining(obs: Observations, tried: Sequence[str]) -> list[str]:

@@ -10,7 +10,7 @@ source gives a global rank of the images, and each camera's frames are put in th
   moment, triangulate well); the cheapest source, and right where a fast motion at a low frame rate puts
   the pose graph and DLOE's order wrong.
 - ``dloe``: the order DLOE recovers along with its reconstruction.
-- ``gttnet``: the order GTT-Net recovers (only where a model runs anyway, e.g. as the fallback).
+- ``gttnet``: the order GTT-Net recovers (only where a model runs anyway: as the fallback, or under ``auto``).
 - ``root``: the position of the skeleton's centre along the main direction it travels (walking, running:
   a periodic motion whose poses repeat but whose position does not).
 
