@@ -237,13 +237,13 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     return float(ex) <= STOP_EXCESS and float(hold) <= STOP_HOLDOUT
 
 
-#: Candidates not run once one of the listed ones has (nor kept when already made): DLOE is GTT-Net's solve on a
-#: hand-made instead of a learned affinity, and the pseudo-triangulation is where both start. On the ``val``
-#: half of the out-of-distribution cells (``benchmarks/bench_auto.py --split val``) DLOE never beat GTT-Net
-#: without sequencing or with each camera's frame order, and the pseudo-triangulation beat neither, while
-#: DLOE took up to 12 s (5 px walks with missing joints) against GTT-Net's 0.5; a DLOE that ``stream-sync``
-#: made for its camera streams, a candidate at no cost, was picked once (16.2 mm where GTT-Net gave 13.6). They
-#: still run where GTT-Net cannot (no bundled model for the skeleton, or an error).
+#: Candidates not run once one of the listed ones has (nor kept when already made): DLOE is GTT-Net's solve
+#: on a hand-made instead of a learned affinity, and the pseudo-triangulation is where both start. On the
+#: ``val`` half of the out-of-distribution cells (``benchmarks/bench_auto.py --split val``) DLOE never beat
+#: GTT-Net without sequencing or with each camera's frame order, and the pseudo-triangulation beat neither,
+#: while DLOE took up to 12 s (5 px walks with missing joints) against GTT-Net's 0.5; a DLOE that
+#: ``stream-sync`` made for its camera streams, a candidate at no cost, was picked once (16.2 mm where
+#: GTT-Net gave 13.6). They still run where GTT-Net cannot (no bundled model for the skeleton, or an error).
 SUBSUMED_BY = {"dloe": ("gttnet",), "pseudo": ("gttnet", "dloe")}
 #: Candidates that solve on the given timestamps (every other one recovers or ignores the timing).
 TIMED = ("hpf",)
@@ -282,7 +282,7 @@ def reconstruct_auto(
 
     Work is shared between candidates: ``stream-sync`` takes its camera streams from the GTT-Net
     reconstruction already made and makes DLOE's only when the cheaper order sources give no right clocks;
-    a DLOE reconstruction it made is the ``dloe`` candidate (not made twice).
+    where GTT-Net cannot run, a DLOE (or pseudo-triangulation) it made is that candidate, not made twice.
 
     Args:
         obs: Observations of any sequencing condition.
@@ -292,7 +292,8 @@ def reconstruct_auto(
     Returns:
         The chosen candidate's reconstruction; ``info["method_ran"]`` names it and ``info["auto"]`` holds
         ``ran``, ``candidates`` (``method``, ``expected_error_mm``, ``seconds``, ``reasons``, ``reused`` for
-        one another candidate made; ``error`` for one that could not run; ``skipped`` with the reason for one not run) and ``why``.
+        one another candidate made; ``error`` for one that could not run; ``skipped`` with the reason for
+        one not run) and ``why``.
     """
     from gttnet.methods import reconstruct
 
@@ -306,9 +307,9 @@ def reconstruct_auto(
         done = [t["method"] for t in tried if "expected_error_mm" in t]
         covered = [m for m in SUBSUMED_BY.get(name, ()) if m in done]
         if covered:
-            why = f"{covered[0]} ran: {name} does not improve on it"
+            reason = f"{covered[0]} ran: {name} does not improve on it"
             tried.append(
-                {"method": name, "skipped": why + (" (made for stream-sync's streams)" if reused else "")}
+                {"method": name, "skipped": reason + (" (made for stream-sync's streams)" if reused else "")}
             )
             continue
         t0 = time.perf_counter()

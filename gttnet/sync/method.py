@@ -252,8 +252,8 @@ def reconstruct_stream_sync(
             noise estimate are kept without trying the remaining sources, and DLOE's order is made only when
             no cheaper source's clocks are within ``max_rms_noise`` (None: every source is tried).
         order_recs: Reconstructions already made of ``obs`` by the order-source methods (``pseudo``,
-            ``dloe``, ``gttnet``), by method name: their orders are used as they are, and the ones ``stream-sync``
-            makes are added (``auto`` runs them as candidates too and does not repeat them).
+            ``dloe``, ``gttnet``), by method name: their orders are used as they are, and the ones
+            ``stream-sync`` makes are added (``auto`` runs them as candidates too and does not repeat them).
 
     Returns:
         :func:`reconstruct_sync`'s reconstruction, or the fallback's, in the input's image order. ``info``

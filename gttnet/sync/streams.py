@@ -144,7 +144,7 @@ def _smallest(noise: Mapping[str, float | None]) -> float | None:
 
 
 def _within(rms: float | None, noise: Mapping[str, float | None], name: str, limit: float | None) -> bool:
-    """Whether clocks leaving ``rms`` px are within ``limit`` x the expected RMS, ``name``'s streams not noisier."""
+    """Whether clocks leaving ``rms`` px are within ``limit`` x the expected RMS, ``name``'s streams quiet."""
     sigma = _smallest(noise)
     if limit is None or sigma is None or rms is None:
         return False
@@ -172,7 +172,7 @@ def choose_streams(
     accept_rms_noise: float | None = None,
     lazy_rms_noise: float | None = None,
 ) -> StreamChoice:
-    """Recover the clocks of the candidate views, cheapest evidence first, and keep the one that explains the images best.
+    """Recover the candidate views' clocks, cheapest first, and keep the one that explains the images best.
 
     The views are tried in the order of their noise estimates (the best-ordered streams first), then the
     ``lazy`` sources in their given order (each made only when reached: e.g. DLOE's order, a whole

@@ -19,7 +19,7 @@ _inner = methods.reconstruct
 
 @pytest.fixture()
 def calls(monkeypatch):
-    """Every ``reconstruct`` call by method name (``auto`` and ``stream-sync`` call it for their candidates)."""
+    """Every ``reconstruct`` call by method name (``auto`` and ``stream-sync`` make their candidates so)."""
     count: collections.Counter = collections.Counter()
     inner = methods.reconstruct
 
@@ -33,7 +33,7 @@ def calls(monkeypatch):
 
 @pytest.fixture(scope="module")
 def noisy():
-    """At 4 px the toy motion's interpolation error is well inside the noise: the timed methods are decisive."""
+    """At 4 px the toy motion's interpolation error is well inside the noise: timed methods are decisive."""
     return _capture((0.0, 0.4, 0.9), (30.0, 30.0, 30.0), end_s=3.0, sigma_px=4.0)
 
 
@@ -116,9 +116,10 @@ def test_stream_sync_fits_clocks_once_per_distinct_streams(mixed, calls):
 
 
 def test_dloe_is_not_run_once_gttnet_has(calls):
-    """At 2 px sync is not decisive on the toy motion, so the order-free candidates are tried: GTT-Net only."""
+    """At 2 px sync is not decisive on the toy motion, so the order-free ones are tried: GTT-Net only."""
     obs, _ = make_view(_capture((0.0, 0.4, 0.9), (30.0, 30.0, 30.0), end_s=3.0, sigma_px=2.0), "partial")
     rec = _inner(obs, "auto", fps=30.0)
     tried = [c["method"] for c in rec.info["auto"]["candidates"] if "skipped" not in c]
     assert tried == ["sync", "gttnet"] and calls["dloe"] == 0
     assert _skipped(rec) == {"dloe": "gttnet ran: dloe does not improve on it"}
+    assert rec.info["auto"]["why"].startswith(rec.info["method_ran"]) and "dloe" not in rec.info["auto"]["why"]
