@@ -72,7 +72,7 @@ def test_a_camera_left_out_without_a_clock_does_not_make_auto_try_the_guessers(n
     obs = _blind(make_view(noisy, "partial")[0], 1)
     rec = _inner(obs, "auto", fps=30.0)
     assert rec.info["method_ran"] == "sync" and "1" in rec.info["cameras_left_out"]
-    assert dict(calls) == {"sync": 1, "hpf": 1}  # hpf: sync's solver on the recovered times
+    assert calls["sync"] == 1 and set(calls) <= {"sync", "hpf"}  # hpf: sync's solver, where it is called so
     assert set(_skipped(rec)) >= {"dloe"}
 
 
@@ -122,4 +122,6 @@ def test_dloe_is_not_run_once_gttnet_has(calls):
     tried = [c["method"] for c in rec.info["auto"]["candidates"] if "skipped" not in c]
     assert tried == ["sync", "gttnet"] and calls["dloe"] == 0
     assert _skipped(rec) == {"dloe": "gttnet ran: dloe does not improve on it"}
-    assert rec.info["auto"]["why"].startswith(rec.info["method_ran"]) and "dloe" not in rec.info["auto"]["why"]
+    assert (
+        rec.info["auto"]["why"].startswith(rec.info["method_ran"]) and "dloe" not in rec.info["auto"]["why"]
+    )
