@@ -9,8 +9,8 @@ Run (the test half is only reported, never tuned on):
     python benchmarks/bench_auto.py --fit runs/bench_auto/fit.jsonl --check runs/bench_auto/test.jsonl
 
 Cells are the recipes under ``recipes/gttdata/ood/`` (periodic walks with 30 % missing joints at 1 and 5 px,
-25/50/60 Hz and mixed rates, non-uniform timestamps, far cameras, pan-tilt-zoom cameras, a quadruped, a wrongly
-declared frame rate, a blind camera); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
+25/50/60 Hz and mixed rates, non-uniform timestamps, far cameras, pan-tilt-zoom cameras, a quadruped, one
+camera declared with a wrong frame rate, a blind camera); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
 Per capture and sequencing condition every candidate method runs (``gttnet.auto.candidates`` for that
 condition, order-free methods included), then ``auto`` itself. Per cell it prints each method's mean MPJPE,
 auto's picks, auto's regret (its MPJPE over the best method's on the same capture and condition: the best
@@ -45,8 +45,9 @@ from gttnet.methods import reconstruct  # noqa: E402
 from gttnet.quality import EXTRAS, FEATURES, ROUGHNESS_FLOOR, features  # noqa: E402
 
 OOD = Path(__file__).resolve().parents[1] / "recipes" / "gttdata" / "ood"
-#: Per-cell changes to the observations: a declared frame rate that is wrong, a camera that sees nothing.
-CELL_FPS = {"wrong_rate": 30.0}
+#: Per-cell changes to the observations: a camera declared with a wrong frame rate ({camera: declared Hz};
+#: the other cameras are declared at their true rate), a camera that sees nothing.
+CELL_FPS: dict[str, dict[int, float]] = {"wrong_rate": {1: 30.0}}
 CELL_BLIND = {"blind_camera": 0}
 SEQS = ("none", "partial", "full")
 #: auto's time is compared with the fastest candidate whose MPJPE is within this factor of the best's.
@@ -97,12 +98,15 @@ def _cell_view(sample, seq: str, cell: str):
         kp = obs.keypoints_px.copy()
         kp[blind] = np.nan
         obs = replace(obs, visible=vis, keypoints_px=kp)
-    if cell in CELL_FPS and seq != "none":
-        hz = CELL_FPS[cell]
-        obs = replace(obs, stream_time_s=np.asarray(obs.stream_index, dtype=np.float64) / hz)
-        opts["fps"] = hz
-    elif cell in CELL_FPS:
-        opts["fps"] = CELL_FPS[cell]
+    if cell in CELL_FPS:
+        true_hz = np.asarray(sample.meta["capture"]["fps_hz"], dtype=np.float64)
+        hz = true_hz.copy()
+        for c, declared in CELL_FPS[cell].items():
+            hz[c] = declared
+        if obs.stream_time_s is not None:  # each camera's clock counts frames at its declared rate
+            cam = np.asarray(obs.cam_id)
+            obs = replace(obs, stream_time_s=np.asarray(obs.stream_time_s) * true_hz[cam] / hz[cam])
+        opts["fps"] = {int(c): float(r) for c, r in enumerate(hz)}
     if obs.stream_time_s is not None:
         opts["frame_times_s"] = np.asarray(obs.stream_time_s, dtype=np.float64)
     return obs, gt, opts

@@ -14,7 +14,14 @@ Every piece of evidence comes from the input and the reconstruction alone:
   (``noise_mm / sin(angle)``): a reconstruction can reproject perfectly yet be wrong in depth where no
   other camera looks at the same moment;
 * **roughness** ``roughness_mm``: the second difference of the 3-D joints along the recovered order
-  (what the motion plus the errors leave between neighbouring images).
+  (what the motion plus the errors leave between neighbouring images);
+* **weak stretches** ``weak_fraction``: the share of the points (image, joint) that fewer than
+  :data:`MIN_VIEWS` cameras see at nearby moments (the subject leaving the views, long occlusions). Nothing
+  triangulates them: only the motion before and after places them, and the residual, held-out and roughness
+  terms, computed where the images see the subject, cannot see their error. Their own term ``weak_mm``
+  combines how far the method's points there are from the interpolation of the observed neighbours
+  (``weak_offset_mm``) with how far the reconstruction's own observed motion leaves such an interpolation
+  over gaps of the same length (``weak_gap_mm``: a held-out prediction across the gap).
 
 :data:`CALIBRATION` maps their logarithms to the logarithm of the MPJPE (a small least-squares fit, see
 its comment for the command that produced it). The per-joint uncertainty spreads the predicted error over
@@ -35,7 +42,7 @@ if TYPE_CHECKING:
     from gttdata.capture.views import Observations
     from gttnet.methods import Reconstruction
 
-__all__ = ["CALIBRATION", "FEATURES", "assess", "features", "joint_uncertainty_mm", "predict_mm"]
+__all__ = ["CALIBRATION", "FEATURES", "assess", "features", "joint_uncertainty_mm", "predict_mm", "weak_mm"]
 
 #: The evidence of the log-linear part, in the order of :data:`CALIBRATION`'s slopes (each enters as its
 #: natural logarithm): the noise at the joints' depth, the held-out error and the roughness over it.
@@ -53,6 +60,11 @@ EXTRAS = (
     "holdout_mm",
     "blind_fraction",
     "blind_mm",
+    "weak_fraction",
+    "weak_offset_mm",
+    "weak_gap_mm",
+    "weak_mm",
+    "longest_unseen_images",
 )
 #: Added to ``roughness_mm / noise_mm`` before the logarithm (smooth trajectories reach 0).
 ROUGHNESS_FLOOR = 0.05
@@ -73,12 +85,18 @@ CALIBRATION: dict[str, Any] = {
     "excess_factor": 2.0,
     "interval_factor": 1.35,
     "interval_rate": 0.8,
+    "weak_gap_factor": 1.0,
 }
 
 #: Images on each side of an image, in the recovered order, whose rays count for its joints' geometry.
 NEIGHBOURS = 4
 #: The smallest ray angle's sine counted (a joint no other camera sees nearby gets this: ~3 degrees).
 MIN_SIN = 0.05
+#: A point is weakly observed where fewer cameras than this see its joint among the images nearest in the
+#: recovered order (about one frame of every camera on each side).
+MIN_VIEWS = 2
+#: An image sees the subject when it observes at least this many joints (``longest_unseen_images``).
+MIN_SEEN_JOINTS = 3
 #: The residual of a 2-D Gaussian's radius at its median, in units of the per-axis std: sqrt(2 ln 2).
 _RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))
 
@@ -228,6 +246,149 @@ def _blind(obs: Observations, X: np.ndarray) -> tuple[float, float]:
     return float(blind.mean()), 1000.0 * float(np.nanmean(e)) if np.isfinite(e).any() else 0.0
 
 
+def _views(obs: Observations, seq: np.ndarray) -> np.ndarray:
+    """How many cameras see each joint among the images near each image in the order ``seq``, shape ``(N, J)``.
+
+    ``seq`` lists the images in their recovered order; the window is one image per camera on each side
+    (``n_cameras`` positions each way), so at every moment each camera has about one frame in it.
+    """
+    n, j = obs.visible.shape
+    cam = np.asarray(obs.cam_id)[seq]
+    vis = np.asarray(obs.visible, dtype=bool)[seq]
+    cams = np.unique(cam)
+    w = int(cams.size)
+    lo = np.clip(np.arange(n) - w, 0, n)
+    hi = np.clip(np.arange(n) + w + 1, 0, n)
+    count = np.zeros((n, j), dtype=np.int64)
+    for c in cams:
+        cs = np.concatenate([np.zeros((1, j), np.int64), np.cumsum((cam == c)[:, None] & vis, axis=0)])
+        count += (cs[hi] - cs[lo]) > 0
+    out = np.empty_like(count)
+    out[seq] = count
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of every maximal run of True in a 1-D mask (``stop`` exclusive)."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+
+
+def _gap_mm(x: np.ndarray, strong: np.ndarray, h: int, base: int) -> float:
+    """Median miss, mm, of predicting the reconstruction's own strong points across a gap of ``h`` positions.
+
+    ``x`` is one joint's track in the recovered order, shape ``(N, 3)``, metres. ``base == 0`` (a gap between
+    two observed stretches): each strong point from the mean of the strong points ``h`` before and after it
+    (the middle of a gap of ``2h - 1``). ``base > 0`` (a gap at an end of the capture): linear
+    extrapolation from the strong points ``h`` and ``h + base`` after it. NaN where no such points.
+    """
+    n = x.shape[0]
+    if base == 0:
+        if n <= 2 * h:
+            return float("nan")
+        q = np.arange(h, n - h)
+        ok = strong[q] & strong[q - h] & strong[q + h]
+        miss = x[q] - 0.5 * (x[q - h] + x[q + h])
+    else:
+        if n <= h + base:
+            return float("nan")
+        q = np.arange(0, n - h - base)
+        ok = strong[q] & strong[q + h] & strong[q + h + base]
+        miss = x[q] - x[q + h] - (h / base) * (x[q + h] - x[q + h + base])
+    d = np.linalg.norm(miss[ok], axis=-1)
+    d = d[np.isfinite(d)]
+    return 1000.0 * float(np.median(d)) if d.size else float("nan")
+
+
+def _weak(
+    obs: Observations, X: np.ndarray, rank: np.ndarray | None, skip: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weakly observed points and, per point, their offset and gap terms (mm), each shape ``(N, J)``.
+
+    A point is weak where fewer than :data:`MIN_VIEWS` cameras see its joint near it in the recovered order
+    (:func:`_views`); images in ``skip`` (blind rows, with their own term) are left out. Along each joint's
+    track, every maximal run of weak points is placed only by its strong neighbours: the offset is each
+    point's distance from the linear interpolation of the run's two neighbours (from the one neighbour at an
+    end of the capture), the gap term :func:`_gap_mm` of the run's length. Without an order nothing is
+    weak (no moment is known; images without observations count as blind rows).
+    """
+    n, j = obs.visible.shape
+    weak = np.zeros((n, j), dtype=bool)
+    offset = np.zeros((n, j))
+    gap = np.zeros((n, j))
+    finite = np.isfinite(X).all(axis=-1)
+    if rank is None:
+        return weak, offset, gap
+    seq = np.argsort(rank, kind="stable")
+    keep = seq[~skip[seq]]
+    if keep.size < 3:
+        return weak, offset, gap
+    views = _views(obs, seq)[keep]
+    Xs = X[keep]
+    ok = finite[keep]
+    base = 2 * int(np.unique(obs.cam_id).size)  # about two frames of each camera: the velocity's baseline
+    cache: dict[tuple[int, int, int], float] = {}
+    for k in range(j):
+        w = (views[:, k] < MIN_VIEWS) & ok[:, k]
+        if not w.any():
+            continue
+        strong = ok[:, k] & ~w
+        if not strong.any():
+            continue
+        for a, b in _runs(w):
+            lo, hi = a - 1, b  # the strong neighbours before and after the run (-1 / n: none)
+            while lo >= 0 and not strong[lo]:
+                lo -= 1
+            while hi < keep.size and not strong[hi]:
+                hi += 1
+            pos = np.arange(a, b)
+            if lo >= 0 and hi < keep.size:
+                t = ((pos - lo) / (hi - lo))[:, None]
+                ref = (1.0 - t) * Xs[lo, k] + t * Xs[hi, k]
+                key = (k, (hi - lo + 1) // 2, 0)
+            elif lo < 0 and hi >= keep.size:
+                continue
+            else:  # at an end: linear extrapolation from the stretch's first observed images
+                sign = 1 if lo < 0 else -1
+                anchor = hi if lo < 0 else lo
+                far = np.flatnonzero(strong)
+                far = far[sign * (far - anchor) >= base]
+                if far.size == 0:
+                    continue
+                second = int(far[0] if sign > 0 else far[-1])
+                v = (Xs[anchor, k] - Xs[second, k]) / abs(second - anchor)
+                ref = Xs[anchor, k] + np.abs(pos - anchor)[:, None] * v
+                key = (k, max((b - a + 1) // 2, 1), base)
+            if key not in cache:
+                x_k = Xs[:, k] if key[2] == 0 or lo < 0 else Xs[::-1, k]
+                st = strong if key[2] == 0 or lo < 0 else strong[::-1]
+                cache[key] = _gap_mm(x_k, st, key[1], key[2])
+            idx = keep[pos]
+            weak[idx, k] = True
+            offset[idx, k] = 1000.0 * np.linalg.norm(Xs[pos, k] - ref, axis=-1)
+            gap[idx, k] = cache[key]
+    return weak, offset, np.nan_to_num(gap, nan=0.0)
+
+
+def _longest_unseen(obs: Observations, rank: np.ndarray | None) -> int:
+    """The longest run of one camera's consecutive images that see fewer than :data:`MIN_SEEN_JOINTS` joints.
+
+    Along each camera's frames (given, else in the recovered order); 0 without any order.
+    """
+    si = _stream_index(obs, rank)
+    if si is None:
+        return 0
+    seen = np.asarray(obs.visible, dtype=bool).sum(axis=1) >= MIN_SEEN_JOINTS
+    cam = np.asarray(obs.cam_id)
+    best = 0
+    for c in np.unique(cam):
+        idx = np.flatnonzero(cam == c)
+        idx = idx[np.argsort(si[idx], kind="stable")]
+        runs = _runs(~seen[idx])
+        best = max([best] + [b - a for a, b in runs])
+    return best
+
+
 def _nanmedian(a: np.ndarray) -> float:
     v = np.asarray(a, dtype=np.float64)
     v = v[np.isfinite(v)]
@@ -288,6 +449,8 @@ def features(
     mm = _nanmedian(s)
     hold = _holdout(obs, X, rank, s)
     blind_frac, blind_mm = _blind(obs, X)
+    blind_rows = _blind_rows(obs)
+    weak, w_off, w_gap = _weak(obs, X, rank, blind_rows)
     out = {
         "sigma_px": None if sigma is None else float(sigma),
         "residual_px": float(residual),
@@ -304,11 +467,38 @@ def features(
         "roughness_ratio": rough / float(sigma_eff * mm) + ROUGHNESS_FLOOR,
         "blind_fraction": blind_frac,
         "blind_mm": blind_mm,
-        "blind_rows": _blind_rows(obs),
+        "blind_rows": blind_rows,
+        "weak_fraction": float(weak.mean()),
+        "weak_offset_mm": _rms(w_off[weak]),
+        "weak_gap_mm": _rms(w_gap[weak]),
+        "longest_unseen_images": _longest_unseen(obs, rank),
+        "weak_points": weak,
+        "weak_offset_point_mm": w_off,
+        "weak_gap_point_mm": w_gap,
         "per_joint_mm": per_joint,
         "per_point_mm": per_point,
     }
+    out["weak_mm"] = weak_mm(out)
     return out
+
+
+def _rms(v: np.ndarray) -> float:
+    v = np.asarray(v, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v**2))) if v.size else 0.0
+
+
+def weak_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None) -> float:
+    """The expected error of the weakly observed points, mm: offset and scaled gap term in quadrature.
+
+    Example:
+        >>> weak_mm({"weak_offset_mm": 30.0, "weak_gap_mm": 40.0}, {"weak_gap_factor": 1.0})
+        50.0
+    """
+    cal = CALIBRATION if calibration is None else calibration
+    off = float(feats.get("weak_offset_mm") or 0.0)
+    gap = float(feats.get("weak_gap_mm") or 0.0)
+    return float(math.hypot(off, float(cal.get("weak_gap_factor", 1.0)) * gap))
 
 
 def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None) -> float:
@@ -317,7 +507,8 @@ def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None)
     The log-linear model covers the images with observations, in quadrature with ``excess_factor`` times
     the residual beyond the noise (``excess_mm``: what the structure fails to explain, at the joints'
     depth); untimed images without any observation (a blind camera) count with their own term, weighted
-    by their share of the images.
+    by their share of the images, and so do the weakly observed points (:func:`weak_mm`, weighted by their
+    share of the points).
     """
     cal = CALIBRATION if calibration is None else calibration
     logv = 0.0 + float(cal["intercept"])
@@ -327,7 +518,9 @@ def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None)
         logv += float(slope) * math.log(max(v, 1e-3))
     seen = math.hypot(math.exp(logv), float(cal["excess_factor"]) * float(feats.get("excess_mm") or 0.0))
     b = float(feats.get("blind_fraction") or 0.0)
-    return float((1.0 - b) * seen + b * float(feats.get("blind_mm") or 0.0))
+    w = float(feats.get("weak_fraction") or 0.0)
+    weak = weak_mm(feats, cal) if w > 0 else 0.0
+    return float(max(1.0 - b - w, 0.0) * seen + b * float(feats.get("blind_mm") or 0.0) + w * weak)
 
 
 def joint_uncertainty_mm(
@@ -337,19 +530,28 @@ def joint_uncertainty_mm(
 
     The bound each point's 3-D error should stay below at :data:`CALIBRATION`'s ``interval_rate``.
 
-    The predicted MPJPE is spread over the points in proportion to each point's own lateral and depth
-    terms, then scaled by the calibrated interval factor.
+    The predicted MPJPE of the well observed points is spread over them in proportion to each point's own
+    lateral and depth terms; a weakly observed point gets its own offset and gap terms (:func:`weak_mm`),
+    a blind image's point the blind term; all scaled by the calibrated interval factor.
     """
     cal = CALIBRATION if calibration is None else calibration
     p = np.asarray(feats["per_point_mm"], dtype=np.float64).copy()
     blind = np.asarray(feats.get("blind_rows", np.zeros(p.shape[0], bool)), dtype=bool)
-    seen = p[~blind]
+    weak = np.asarray(feats.get("weak_points", np.zeros(p.shape, bool)), dtype=bool) & ~blind[:, None]
+    seen = p[~blind[:, None] & ~weak]
     m = float(np.nanmean(seen)) if np.isfinite(seen).any() else float("nan")
     if not math.isfinite(m) or m <= 0:
         return np.full(p.shape, np.nan)
     b = float(feats.get("blind_fraction") or 0.0)
-    observed_mm = (expected_mm - b * float(feats.get("blind_mm") or 0.0)) / max(1.0 - b, 1e-9)
+    w = float(feats.get("weak_fraction") or 0.0)
+    rest = expected_mm - b * float(feats.get("blind_mm") or 0.0) - (w * weak_mm(feats, cal) if w > 0 else 0.0)
+    observed_mm = rest / max(1.0 - b - w, 1e-9)
     out = p * max(observed_mm, 0.0) / m
+    if weak.any():
+        off = np.asarray(feats["weak_offset_point_mm"], dtype=np.float64)
+        gap = np.asarray(feats["weak_gap_point_mm"], dtype=np.float64)
+        own = np.hypot(off, float(cal.get("weak_gap_factor", 1.0)) * gap)
+        out[weak] = np.where(np.isfinite(p[weak]), np.maximum(own[weak], out[weak]), np.nan)
     out[blind] = np.where(np.isfinite(p[blind]), float(feats.get("blind_mm") or 0.0), np.nan)
     return float(cal["interval_factor"]) * out
 
@@ -368,6 +570,18 @@ def _reasons(f: dict[str, Any], expected: float) -> list[str]:
         out.append(
             f"weak triangulation: joints are rarely seen by another camera at nearby moments "
             f"(depth term {f['geometry_mm']:.0f} mm against {f['noise_mm']:.1f} mm lateral noise)"
+        )
+    w = float(f.get("weak_fraction") or 0.0)
+    if w > 0.0 and w * float(f.get("weak_mm") or 0.0) > 0.25 * expected:
+        gap = int(f.get("longest_unseen_images") or 0)
+        why = (
+            f"the longest stretch of one camera's images without the subject is {gap} images"
+            if gap >= MIN_SEEN_JOINTS
+            else "the images do see the subject: the recovered clocks or order may put views of one moment apart"
+        )
+        out.append(
+            f"{w:.0%} of the joints' positions are seen by fewer than {MIN_VIEWS} cameras at nearby moments "
+            f"({why}): only the motion around them places them, expected error there {f['weak_mm']:.0f} mm"
         )
     if not out:
         out.append("residual at the noise floor and good triangulation angles")

@@ -109,3 +109,22 @@ def test_root_rank_orders_a_walk_whose_poses_repeat():
     rank = root_rank(x[perm])
     in_time = perm[np.argsort(rank)]  # the true time index of the images, in the recovered order
     assert np.all(np.diff(in_time) > 0) or np.all(np.diff(in_time) < 0)
+
+
+def test_auto_with_one_camera_declared_at_a_wrong_rate_warns_naming_it(unequal, caplog):
+    """One camera's declared rate wrong, the others right: ``auto`` names it and its likely rate.
+
+    Its result is as good as with the right rates (not silently worse).
+    """
+    from gttnet.evaluate.metrics import mpjpe_mm
+    from gttnet.methods import reconstruct
+
+    obs, gt = unequal
+    right = reconstruct(obs, "auto", fps={0: 25.0, 1: 50.0, 2: 60.0})
+    with caplog.at_level(logging.WARNING, logger="gttnet.sync"):
+        rec = reconstruct(obs, "auto", fps={0: 25.0, 1: 30.0, 2: 60.0})  # camera 1 really runs at 50 Hz
+    msgs = [r.getMessage() for r in caplog.records]
+    assert any(m.startswith("camera 1: the given 30 Hz") and "likely 50 Hz" in m for m in msgs), msgs
+    assert not any(m.startswith(("camera 0", "camera 2")) for m in msgs), msgs
+    assert mpjpe_mm(rec.points3d, gt.points3d) <= 1.2 * mpjpe_mm(right.points3d, gt.points3d)
+    assert rec.info["quality"]["expected_error_mm"] <= 2.0 * right.info["quality"]["expected_error_mm"]
