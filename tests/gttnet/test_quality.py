@@ -80,6 +80,38 @@ def test_a_blind_camera_counts_where_nothing_times_its_images(capture):
     assert features(obs, rec)["blind_fraction"] == 0.0
 
 
+def _hide(obs, times, lo, hi):
+    """``obs`` without any joint in the images of cameras 1 and 2 taken in ``[lo, hi)`` s (camera 0 alone)."""
+    gone = (times >= lo) & (times < hi) & (obs.cam_id != 0)
+    vis = obs.visible & ~gone[:, None]
+    return replace(obs, visible=vis, keypoints_px=np.where(vis[..., None], obs.keypoints_px, np.nan)), gone
+
+
+def test_a_stretch_seen_by_one_camera_is_weak_and_counts_in_the_prediction(capture):
+    """The subject leaving two of three views: its joints there rest on the motion around the stretch."""
+    obs, gt = make_view(capture, "partial")
+    truth = _truth(obs, gt)
+    short, _ = _hide(obs, gt.timestamp_s, 1.5, 1.7)
+    long, gone = _hide(obs, gt.timestamp_s, 1.5, 2.0)
+    f0, f1, f2 = features(obs, truth), features(short, truth), features(long, truth)
+    # the cameras start 0.4 and 0.9 s apart: before the second starts, one camera alone sees the subject
+    assert f0["weak_fraction"] == pytest.approx(np.mean(gt.timestamp_s < 0.4), abs=0.02)
+    assert f0["longest_unseen_images"] == 0
+    assert f0["weak_fraction"] < f1["weak_fraction"] < f2["weak_fraction"]
+    assert f2["longest_unseen_images"] >= 14  # 0.5 s of a 30 Hz camera
+    assert f1["weak_gap_mm"] < f2["weak_gap_mm"]  # over a longer gap the motion leaves interpolation further
+    assert f2["weak_offset_mm"] < 2.0 * f2["weak_gap_mm"]  # the truth leaves interpolation as much as it can
+    # A reconstruction that leaves the stretch 20 cm off: its offset shows it, the prediction follows.
+    pts = truth.points3d.copy()
+    pts[gone] += 0.2
+    fb = features(long, replace(truth, points3d=pts))
+    assert fb["weak_offset_mm"] > 150.0 and predict_mm(fb) > 1.5 * predict_mm(f2)
+    q, unc = assess(long, replace(truth, points3d=pts))
+    assert any("fewer than 2 cameras" in r for r in q["reasons"])
+    weak = fb["weak_points"]
+    assert np.nanmedian(unc[weak]) > 3.0 * np.nanmedian(unc[~weak])  # the weak points' own intervals
+
+
 def test_auto_stops_at_a_decisive_candidate_and_reports_its_choice():
     """At 4 px the toy motion's interpolation error is well inside the noise: clocks explain everything."""
     obs, _ = make_view(_capture((0.0, 0.4, 0.9), (30.0, 30.0, 30.0), end_s=3.0, sigma_px=4.0), "partial")
