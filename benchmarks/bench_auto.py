@@ -10,7 +10,7 @@ Run (the test half is only reported, never tuned on):
 
 Cells are the recipes under ``recipes/gttdata/ood/`` (periodic walks with 30 % missing joints at 1 and 5 px,
 25/50/60 Hz and mixed rates, non-uniform timestamps, far cameras, pan-tilt-zoom cameras, a quadruped, one
-camera declared with a wrong frame rate, a blind camera); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
+camera declared with a wrong frame rate, a blind camera, a second person in some frames); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
 Per capture and sequencing condition every candidate method runs (``gttnet.auto.candidates`` for that
 condition, order-free methods included), then ``auto`` itself. Per cell it prints each method's mean MPJPE,
 auto's picks, auto's regret (its MPJPE over the best method's on the same capture and condition: the best
@@ -42,13 +42,17 @@ from gttdata.generate_plan import build_sample  # noqa: E402
 from gttdata.recipe import load_recipe  # noqa: E402
 from gttnet.evaluate.metrics import mpjpe_mm  # noqa: E402
 from gttnet.methods import reconstruct  # noqa: E402
-from gttnet.quality import EXTRAS, FEATURES, ROUGHNESS_FLOOR, features  # noqa: E402
+from gttnet.quality import CALIBRATION, EXTRAS, FEATURES, ROUGHNESS_FLOOR, features, predict_mm  # noqa: E402
 
 OOD = Path(__file__).resolve().parents[1] / "recipes" / "gttdata" / "ood"
 #: Per-cell changes to the observations: a camera declared with a wrong frame rate ({camera: declared Hz};
 #: the other cameras are declared at their true rate), a camera that sees nothing.
 CELL_FPS: dict[str, dict[int, float]] = {"wrong_rate": {1: 30.0}}
 CELL_BLIND = {"blind_camera": 0}
+#: A second person walking through some cameras' views: in a contiguous ``fraction`` of those cameras'
+#: frames the detector hands in that person (``offset_m`` beside the subject, moving as the subject does
+#: in reverse time: another pose at every moment) instead of the subject, as a one-person reader would.
+CELL_SECOND = {"second_person": {"cameras": (2, 3), "fraction": 0.2, "offset_m": 1.2, "start": 0.4}}
 SEQS = ("none", "partial", "full")
 #: auto's time is compared with the fastest candidate whose MPJPE is within this factor of the best's.
 NEAR_BEST = 1.05
@@ -87,6 +91,36 @@ def _score(rec, gt) -> dict:
     }
 
 
+def _second_person(obs, gt, sample, *, cameras, fraction: float, offset_m: float, start: float):
+    """``obs`` with a second person's detections in place of the subject's in some frames of ``cameras``.
+
+    The second person is the subject's motion in reverse time, ``offset_m`` to the side (world x), projected
+    through each image's camera with the capture's 2-D noise; in each camera of ``cameras`` it replaces the
+    subject in the frames from ``start`` to ``start + fraction`` of the camera's frames (by time).
+    """
+    X = np.asarray(gt.points3d, dtype=np.float64)
+    order = np.argsort(gt.timestamp_s, kind="stable")
+    other = np.empty_like(X)
+    other[order] = X[order[::-1]]  # the pose of the mirrored moment
+    other = other + np.array([offset_m, 0.0, 0.0])
+    T = np.asarray(obs.cam_from_world, dtype=np.float64)
+    Xc = np.einsum("nab,njb->nja", T[:, :3, :3], other) + T[:, None, :3, 3]
+    uv = np.einsum("nab,njb->nja", np.asarray(obs.K)[:, :2, :3], Xc) / Xc[..., 2:3]
+    sigma = float(sample.meta["capture"]["sigma_px"])
+    uv = uv + np.random.default_rng(7).normal(0.0, sigma, uv.shape)
+    kp, vis = np.asarray(obs.keypoints_px).copy(), np.asarray(obs.visible).copy()
+    t = np.asarray(gt.timestamp_s)
+    for c in cameras:
+        idx = np.flatnonzero(np.asarray(obs.cam_id) == c)
+        idx = idx[np.argsort(t[idx], kind="stable")]
+        lo = int(start * idx.size)
+        swap = idx[lo : lo + int(fraction * idx.size)]
+        seen = Xc[swap, :, 2] > 0
+        kp[swap] = np.where(seen[..., None], uv[swap], np.nan)
+        vis[swap] = seen
+    return replace(obs, keypoints_px=kp, visible=vis)
+
+
 def _cell_view(sample, seq: str, cell: str):
     """The capture's view under ``seq`` with the cell's input faults applied, and timing options."""
     obs, gt = make_view(sample, seq)
@@ -98,6 +132,8 @@ def _cell_view(sample, seq: str, cell: str):
         kp = obs.keypoints_px.copy()
         kp[blind] = np.nan
         obs = replace(obs, visible=vis, keypoints_px=kp)
+    if cell in CELL_SECOND:
+        obs = _second_person(obs, gt, sample, **CELL_SECOND[cell])
     if cell in CELL_FPS:
         true_hz = np.asarray(sample.meta["capture"]["fps_hz"], dtype=np.float64)
         hz = true_hz.copy()
@@ -290,13 +326,19 @@ def _coverage_line(rows: list[dict]) -> str:
 
 
 def fit(rows: list[dict]) -> dict:
-    """Least-squares fit of log MPJPE on the logs of :data:`gttnet.quality.FEATURES`.
+    """Least-squares fit of log MPJPE on the logs of :data:`gttnet.quality.FEATURES`, and the weak gap factor.
 
     Only reconstructions whose residual is within the noise (``excess_mm`` at most half the noise at the
-    joints' depth) and without blind images enter: the excess and blind terms have their own forms.
+    joints' depth), without blind images, with at most 1 % weakly observed points and 2 % contradicted images
+    enter the log-linear fit: the excess, blind, weak and outlier terms have their own forms.
+    ``weak_gap_factor`` and ``outlier_factor`` are then chosen together on the other reconstructions (a grid,
+    least squares in log), with :data:`gttnet.quality.CALIBRATION`'s intercept and slopes (so they can be
+    refitted alone).
     """
     use = [_derived(r) for r in rows if "mpjpe_mm" in r and r["method"] != "auto" and r.get("noise_mm")]
+    special = [r for r in use if _weak_or_outlier(r)]
     use = [r for r in use if r["excess_mm"] <= 0.5 * r["noise_mm"] and not r.get("blind_fraction")]
+    use = [r for r in use if not _weak_or_outlier(r)]
     A = np.array([[1.0] + [np.log(r[k]) for k in FEATURES] for r in use])
     y = np.log([r["mpjpe_mm"] for r in use])
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
@@ -306,7 +348,31 @@ def fit(rows: list[dict]) -> dict:
         f"{np.mean(np.abs(resid) <= np.log(2)):.1%} within [0.5x, 2x]",
         file=sys.stderr,
     )
-    return {"intercept": round(float(coef[0]), 4), "slopes": [round(float(c), 4) for c in coef[1:]]}
+    out = {"intercept": round(float(coef[0]), 4), "slopes": [round(float(c), 4) for c in coef[1:]]}
+    if special:  # the weak and outlier factors, under the module's current log-linear part
+        grid = np.round(np.arange(0.0, 3.01, 0.1), 2)
+        best = (np.inf, 0.0, 0.0)
+        for cw in grid:
+            for co in grid:
+                cal = {**CALIBRATION, "weak_gap_factor": cw, "outlier_factor": co}
+                cost = float(
+                    np.mean([np.log(r["mpjpe_mm"] / max(predict_mm(r, cal), 1e-6)) ** 2 for r in special])
+                )
+                best = min(best, (cost, float(cw), float(co)))
+        out["weak_gap_factor"], out["outlier_factor"] = best[1], best[2]
+        cal = {**CALIBRATION, "weak_gap_factor": best[1], "outlier_factor": best[2]}
+        ok = np.mean([_ratio_ok(predict_mm(r, cal), r["mpjpe_mm"]) for r in special])
+        print(
+            f"# weak / outlier factors on {len(special)} reconstructions: {best[1]}, {best[2]} "
+            f"(log residual rms {np.sqrt(best[0]):.3f}, {ok:.1%} within [0.5x, 2x])",
+            file=sys.stderr,
+        )
+    return out
+
+
+def _weak_or_outlier(r: dict) -> bool:
+    """Whether a row has over 1 % weakly observed points or over 2 % contradicted images."""
+    return (r.get("weak_fraction") or 0.0) > 0.01 or (r.get("outlier_fraction") or 0.0) > 0.02
 
 
 def main() -> None:

@@ -21,7 +21,11 @@ Every piece of evidence comes from the input and the reconstruction alone:
   terms, computed where the images see the subject, cannot see their error. Their own term ``weak_mm``
   combines how far the method's points there are from the interpolation of the observed neighbours
   (``weak_offset_mm``) with how far the reconstruction's own observed motion leaves such an interpolation
-  over gaps of the same length (``weak_gap_mm``: a held-out prediction across the gap).
+  over gaps of the same length (``weak_gap_mm``: a held-out prediction across the gap);
+* **contradicted images** ``outlier_fraction``: the share of the images whose prediction from the other
+  cameras misses by over :data:`OUTLIER_HOLDOUT` times the noise against most of them (:func:`_contradicted`),
+  and that miss's mean ``outlier_mm``: images the other cameras contradict (a second person handed in by the detector, a mis-detection, a wrong
+  clock). Medians over all points cannot see a tenth of the images being far off; this term does.
 
 :data:`CALIBRATION` maps their logarithms to the logarithm of the MPJPE (a small least-squares fit, see
 its comment for the command that produced it). The per-joint uncertainty spreads the predicted error over
@@ -65,6 +69,8 @@ EXTRAS = (
     "weak_gap_mm",
     "weak_mm",
     "longest_unseen_images",
+    "outlier_fraction",
+    "outlier_mm",
 )
 #: Added to ``roughness_mm / noise_mm`` before the logarithm (smooth trajectories reach 0).
 ROUGHNESS_FLOOR = 0.05
@@ -85,7 +91,8 @@ CALIBRATION: dict[str, Any] = {
     "excess_factor": 2.0,
     "interval_factor": 1.35,
     "interval_rate": 0.8,
-    "weak_gap_factor": 1.0,
+    "weak_gap_factor": 0.2,
+    "outlier_factor": 1.0,
 }
 
 #: Images on each side of an image, in the recovered order, whose rays count for its joints' geometry.
@@ -95,6 +102,8 @@ MIN_SIN = 0.05
 #: A point is weakly observed where fewer cameras than this see its joint among the images nearest in the
 #: recovered order (about one frame of every camera on each side).
 MIN_VIEWS = 2
+#: An image contradicts the other cameras where its held-out error is over this many times the noise (mm).
+OUTLIER_HOLDOUT = 5.0
 #: An image sees the subject when it observes at least this many joints (``longest_unseen_images``).
 MIN_SEEN_JOINTS = 3
 #: The residual of a 2-D Gaussian's radius at its median, in units of the per-axis std: sqrt(2 ln 2).
@@ -197,6 +206,60 @@ def _holdout(obs: Observations, X: np.ndarray, rank: np.ndarray | None, s: np.nd
     Xh[seq[p]] = (1.0 - w) * X[seq[a]] + w * X[seq[b]]
     r, _z, _s = _reprojection(obs, Xh)
     return r * s / _RAYLEIGH_MEDIAN
+
+
+def _contradicted(
+    obs: Observations, X: np.ndarray, rank: np.ndarray | None, s: np.ndarray, noise_mm: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Images the other cameras contradict, shape ``(N,)`` bool, and their per-point miss (mm), ``(N, J)``.
+
+    Each image is predicted from each other camera separately (linear in rank between that camera's
+    nearest images before and after it) and reprojected into it; the image's miss against that camera is
+    the median over its joints, in mm at their depth. An image is contradicted where its miss exceeds
+    :data:`OUTLIER_HOLDOUT` times the noise against more than half of the cameras that predict it: a bad
+    image disagrees with every camera, while its neighbours disagree only with the bad image's camera.
+    """
+    n, j = obs.visible.shape
+    none = np.zeros(n, dtype=bool), np.full((n, j), np.nan)
+    if rank is None or n < 3:
+        return none
+    seq = np.argsort(rank, kind="stable")
+    cam = np.asarray(obs.cam_id)[seq]
+    pos = np.arange(n)
+    cams = np.unique(cam)
+    misses, points = [], []
+    for c in cams:
+        theirs = pos[cam == c]
+        if theirs.size < 2:
+            continue
+        k = np.searchsorted(theirs, pos)
+        ok = (k > 0) & (k < theirs.size) & (cam != c)
+        if not ok.any():
+            continue
+        p, a, b = pos[ok], theirs[k[ok] - 1], theirs[k[ok]]
+        w = ((p - a) / (b - a))[:, None, None]
+        Xh = np.full(X.shape, np.nan)
+        Xh[seq[p]] = (1.0 - w) * X[seq[a]] + w * X[seq[b]]
+        r, _z, _s = _reprojection(obs, Xh)
+        pt = r * s / _RAYLEIGH_MEDIAN
+        with np.errstate(invalid="ignore"):
+            misses.append(np.array([_nanmedian(row) for row in pt]))
+        points.append(pt)
+    if len(misses) < 1:
+        return none
+    m = np.stack(misses)
+    with np.errstate(invalid="ignore"):
+        high = (m > OUTLIER_HOLDOUT * noise_mm).sum(axis=0)
+    known = np.isfinite(m).sum(axis=0)
+    flag = (known > 0) & (high > 0.5 * known)
+    miss = np.full((n, j), np.nan)
+    if flag.any():
+        pts = np.stack(points)[:, flag]  # (cameras, flagged images, J)
+        seen = np.isfinite(pts).any(axis=0)
+        sub = np.full(pts.shape[1:], np.nan)
+        sub[seen] = np.nanmedian(pts[:, seen], axis=0)
+        miss[flag] = sub
+    return flag, miss
 
 
 def _blind_rows(obs: Observations) -> np.ndarray:
@@ -451,6 +514,10 @@ def features(
     blind_frac, blind_mm = _blind(obs, X)
     blind_rows = _blind_rows(obs)
     weak, w_off, w_gap = _weak(obs, X, rank, blind_rows)
+    outlier, out_pt = _contradicted(obs, X, rank, s, float(sigma_eff * mm))
+    outlier &= ~blind_rows
+    with np.errstate(invalid="ignore"):
+        img_miss = np.array([_nanmedian(row) for row in out_pt])
     out = {
         "sigma_px": None if sigma is None else float(sigma),
         "residual_px": float(residual),
@@ -472,6 +539,10 @@ def features(
         "weak_offset_mm": _rms(w_off[weak]),
         "weak_gap_mm": _rms(w_gap[weak]),
         "longest_unseen_images": _longest_unseen(obs, rank),
+        "outlier_fraction": float(outlier.mean()),
+        "outlier_mm": float(np.nanmean(img_miss[outlier])) if outlier.any() else 0.0,
+        "outlier_rows": outlier,
+        "outlier_point_mm": np.where(outlier[:, None], out_pt, np.nan),
         "weak_points": weak,
         "weak_offset_point_mm": w_off,
         "weak_gap_point_mm": w_gap,
@@ -508,7 +579,8 @@ def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None)
     the residual beyond the noise (``excess_mm``: what the structure fails to explain, at the joints'
     depth); untimed images without any observation (a blind camera) count with their own term, weighted
     by their share of the images, and so do the weakly observed points (:func:`weak_mm`, weighted by their
-    share of the points).
+    share of the points) and the images the other cameras contradict (``outlier_factor`` times their
+    held-out error, weighted by their share of the images).
     """
     cal = CALIBRATION if calibration is None else calibration
     logv = 0.0 + float(cal["intercept"])
@@ -519,8 +591,11 @@ def predict_mm(feats: dict[str, Any], calibration: dict[str, Any] | None = None)
     seen = math.hypot(math.exp(logv), float(cal["excess_factor"]) * float(feats.get("excess_mm") or 0.0))
     b = float(feats.get("blind_fraction") or 0.0)
     w = float(feats.get("weak_fraction") or 0.0)
+    o = float(feats.get("outlier_fraction") or 0.0)
     weak = weak_mm(feats, cal) if w > 0 else 0.0
-    return float(max(1.0 - b - w, 0.0) * seen + b * float(feats.get("blind_mm") or 0.0) + w * weak)
+    out = float(cal.get("outlier_factor", 1.0)) * float(feats.get("outlier_mm") or 0.0)
+    rest = max(1.0 - b - w - o, 0.0)
+    return float(rest * seen + b * float(feats.get("blind_mm") or 0.0) + w * weak + o * out)
 
 
 def joint_uncertainty_mm(
@@ -538,15 +613,24 @@ def joint_uncertainty_mm(
     p = np.asarray(feats["per_point_mm"], dtype=np.float64).copy()
     blind = np.asarray(feats.get("blind_rows", np.zeros(p.shape[0], bool)), dtype=bool)
     weak = np.asarray(feats.get("weak_points", np.zeros(p.shape, bool)), dtype=bool) & ~blind[:, None]
-    seen = p[~blind[:, None] & ~weak]
+    seen = p[
+        ~blind[:, None] & ~weak & ~np.asarray(feats.get("outlier_rows", np.zeros(p.shape[0], bool)))[:, None]
+    ]
     m = float(np.nanmean(seen)) if np.isfinite(seen).any() else float("nan")
     if not math.isfinite(m) or m <= 0:
         return np.full(p.shape, np.nan)
     b = float(feats.get("blind_fraction") or 0.0)
     w = float(feats.get("weak_fraction") or 0.0)
+    o = float(feats.get("outlier_fraction") or 0.0)
+    o_mm = float(cal.get("outlier_factor", 1.0)) * float(feats.get("outlier_mm") or 0.0)
     rest = expected_mm - b * float(feats.get("blind_mm") or 0.0) - (w * weak_mm(feats, cal) if w > 0 else 0.0)
-    observed_mm = rest / max(1.0 - b - w, 1e-9)
+    observed_mm = (rest - o * o_mm) / max(1.0 - b - w - o, 1e-9)
     out = p * max(observed_mm, 0.0) / m
+    outlier = np.asarray(feats.get("outlier_rows", np.zeros(p.shape[0], bool)), dtype=bool)
+    if outlier.any():
+        own = float(cal.get("outlier_factor", 1.0)) * np.asarray(feats["outlier_point_mm"], dtype=np.float64)
+        fill = np.where(np.isfinite(own), own, o_mm)
+        out[outlier] = np.where(np.isfinite(p[outlier]), np.maximum(fill[outlier], out[outlier]), np.nan)
     if weak.any():
         off = np.asarray(feats["weak_offset_point_mm"], dtype=np.float64)
         gap = np.asarray(feats["weak_gap_point_mm"], dtype=np.float64)
@@ -582,6 +666,13 @@ def _reasons(f: dict[str, Any], expected: float) -> list[str]:
         out.append(
             f"{w:.0%} of the joints' positions are seen by fewer than {MIN_VIEWS} cameras at nearby moments "
             f"({why}): only the motion around them places them, expected error there {f['weak_mm']:.0f} mm"
+        )
+    o = float(f.get("outlier_fraction") or 0.0)
+    if o > 0.0 and o * float(f.get("outlier_mm") or 0.0) > 0.25 * expected:
+        out.append(
+            f"{o:.0%} of the images are contradicted by the other cameras (held-out error {f['outlier_mm']:.0f} mm, "
+            f"over {OUTLIER_HOLDOUT:g}x the noise): another person handed in by the detector, mis-detections "
+            "or wrong clocks?"
         )
     if not out:
         out.append("residual at the noise floor and good triangulation angles")

@@ -112,6 +112,32 @@ def test_a_stretch_seen_by_one_camera_is_weak_and_counts_in_the_prediction(captu
     assert np.nanmedian(unc[weak]) > 3.0 * np.nanmedian(unc[~weak])  # the weak points' own intervals
 
 
+
+def test_images_of_another_person_are_contradicted_and_counted(capture):
+    """A detector handing in a second person, 1 m aside, in a tenth of the images: the medians cannot see it."""
+    obs, gt = make_view(capture, "partial")
+    truth = _truth(obs, gt)
+    t = gt.timestamp_s
+    other = (obs.cam_id == 2) & (t >= 1.5) & (t < 2.4)  # about a tenth of the images
+    pts = truth.points3d.copy()
+    pts[other] += np.array([1.0, 0.0, 0.0])  # a method that follows the detections there
+    Xc = np.einsum("nab,njb->nja", obs.cam_from_world[:, :3, :3], pts) + obs.cam_from_world[:, None, :3, 3]
+    uv = np.einsum("nab,njb->nja", obs.K[:, :2, :3], Xc) / Xc[..., 2:3]
+    kp = np.where(other[:, None, None], uv, obs.keypoints_px)
+    crowd = replace(obs, keypoints_px=kp)
+    rec = replace(truth, points3d=pts)
+    f, f0 = features(crowd, rec), features(obs, truth)
+    assert f0["outlier_fraction"] == 0.0
+    assert f["outlier_fraction"] == pytest.approx(other.mean(), abs=0.02)
+    assert f["residual_px"] < 1.2 * f0["residual_px"]  # the median residual does not see a tenth of the images
+    true_mm = 1000.0 * float(np.mean(np.linalg.norm(pts - gt.points3d, axis=-1)))
+    assert 0.5 * true_mm <= predict_mm(f) <= 2.0 * true_mm
+    assert predict_mm(f0) < 0.25 * true_mm
+    q, unc = assess(crowd, rec)
+    assert any("contradicted by the other cameras" in r for r in q["reasons"])
+    assert np.nanmedian(unc[other]) > 500.0  # their own intervals cover the metre
+
+
 def test_auto_stops_at_a_decisive_candidate_and_reports_its_choice():
     """At 4 px the toy motion's interpolation error is well inside the noise: clocks explain everything."""
     obs, _ = make_view(_capture((0.0, 0.4, 0.9), (30.0, 30.0, 30.0), end_s=3.0, sigma_px=4.0), "partial")
