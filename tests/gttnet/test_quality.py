@@ -112,7 +112,6 @@ def test_a_stretch_seen_by_one_camera_is_weak_and_counts_in_the_prediction(captu
     assert np.nanmedian(unc[weak]) > 3.0 * np.nanmedian(unc[~weak])  # the weak points' own intervals
 
 
-
 def test_images_of_another_person_are_contradicted_and_counted(capture):
     """A detector handing in a second person, 1 m aside, in a tenth of the images: the medians cannot see it."""
     obs, gt = make_view(capture, "partial")
@@ -129,7 +128,9 @@ def test_images_of_another_person_are_contradicted_and_counted(capture):
     f, f0 = features(crowd, rec), features(obs, truth)
     assert f0["outlier_fraction"] == 0.0
     assert f["outlier_fraction"] == pytest.approx(other.mean(), abs=0.02)
-    assert f["residual_px"] < 1.2 * f0["residual_px"]  # the median residual does not see a tenth of the images
+    assert (
+        f["residual_px"] < 1.2 * f0["residual_px"]
+    )  # the median residual does not see a tenth of the images
     true_mm = 1000.0 * float(np.mean(np.linalg.norm(pts - gt.points3d, axis=-1)))
     assert 0.5 * true_mm <= predict_mm(f) <= 2.0 * true_mm
     assert predict_mm(f0) < 0.25 * true_mm
