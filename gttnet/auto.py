@@ -49,8 +49,10 @@ log = logging.getLogger(__name__)
 
 #: A candidate is decisive when its reprojection residual is at most this multiple of the capture's noise...
 STOP_EXCESS = 1.3
-#: ... and its held-out prediction error at most this multiple of the noise at the joints' depth (mm/mm).
+#: ... and its held-out prediction error at most this multiple of the noise at the joints' depth (mm/mm),
 STOP_HOLDOUT = 1.1
+#: ... and at most this share of its expected error from weakly observed points and contradicted images.
+STOP_HIDDEN = 0.5
 
 
 #: Candidates run before a decisive one may stop the search, by sequencing: without any, the clocks rest
@@ -212,6 +214,15 @@ def candidates(
     yield "dloe", {}
 
 
+def _hidden_mm(quality: Mapping[str, Any]) -> float:
+    """The part of ``expected_error_mm`` from weakly observed points and contradicted images, mm."""
+    from gttnet.quality import CALIBRATION
+
+    weak = float(quality.get("weak_fraction") or 0.0) * float(quality.get("weak_mm") or 0.0)
+    out = float(quality.get("outlier_fraction") or 0.0) * float(quality.get("outlier_mm") or 0.0)
+    return weak + float(CALIBRATION.get("outlier_factor", 1.0)) * out
+
+
 def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     """Whether a candidate's self-assessment leaves nothing to gain from trying the others.
 
@@ -221,7 +232,8 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     without a pose (a camera no clock could be recovered for, reported as left out: ``blind_mm`` 0) or
     placed by its timestamp (``timed``: the candidate solves on the given timestamps). No other candidate
     has evidence to place such images better: the less informed ones can only guess where in the motion
-    they belong.
+    they belong. And what the medians cannot see (weakly observed points, images the other cameras
+    contradict: :mod:`gttnet.quality`) makes at most :data:`STOP_HIDDEN` of its expected error.
     """
     if quality.get("sigma_px") is None:
         return False
@@ -230,6 +242,8 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
         and not timed
         and float(quality.get("blind_mm") or 0.0) > 0.0
     ):
+        return False
+    if _hidden_mm(quality) > STOP_HIDDEN * float(quality.get("expected_error_mm") or 0.0):
         return False
     ex, hold = quality.get("excess"), quality.get("holdout_ratio")
     if ex is None or hold is None:
