@@ -368,6 +368,16 @@ def _gap_mm(x: np.ndarray, strong: np.ndarray, h: int, base: int) -> float:
     return 1000.0 * float(np.median(d)) if d.size else float("nan")
 
 
+def _binned(h: int) -> int:
+    """``h`` rounded to a power of 1.25 (at most a few dozen gap lengths per joint on any recording).
+
+    Example:
+        >>> [_binned(h) for h in (1, 2, 3, 7, 100)]
+        [1, 2, 3, 7, 108]
+    """
+    return max(1, int(round(1.25 ** round(math.log(max(h, 1)) / math.log(1.25)))))
+
+
 def _weak(
     obs: Observations, X: np.ndarray, rank: np.ndarray | None, skip: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -413,7 +423,7 @@ def _weak(
             if lo >= 0 and hi < keep.size:
                 t = ((pos - lo) / (hi - lo))[:, None]
                 ref = (1.0 - t) * Xs[lo, k] + t * Xs[hi, k]
-                key = (k, (hi - lo + 1) // 2, 0)
+                key = (k, _binned((hi - lo + 1) // 2), 0)
             elif lo < 0 and hi >= keep.size:
                 continue
             else:  # at an end: linear extrapolation from the stretch's first observed images
@@ -426,7 +436,7 @@ def _weak(
                 second = int(far[0] if sign > 0 else far[-1])
                 v = (Xs[anchor, k] - Xs[second, k]) / abs(second - anchor)
                 ref = Xs[anchor, k] + np.abs(pos - anchor)[:, None] * v
-                key = (k, max((b - a + 1) // 2, 1), base)
+                key = (k, _binned(max((b - a + 1) // 2, 1)), base)
             if key not in cache:
                 x_k = Xs[:, k] if key[2] == 0 or lo < 0 else Xs[::-1, k]
                 st = strong if key[2] == 0 or lo < 0 else strong[::-1]
