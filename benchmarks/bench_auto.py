@@ -285,6 +285,38 @@ def table(rows: list[dict]) -> str:
             f"of {len(calib)} reconstructions"
         )
         out.append(_coverage_line(ok_rows))
+        out.append("\n" + calibration_table(ok_rows))
+    return "\n".join(out)
+
+
+def calibration_table(rows: list[dict]) -> str:
+    """Per cell: the share within [0.5x, 2x], without and with the weak and outlier terms, and the coverage.
+
+    "without" recomputes each candidate's prediction from its row with ``weak_fraction`` and
+    ``outlier_fraction`` set to 0 (the model before those terms); auto's rows carry no evidence, so the
+    first two columns are over the candidates only.
+    """
+    out = [
+        "| cell | candidates (+ auto) | within [0.5x, 2x] without weak/outlier terms | with | with, auto's rows "
+        "included | per-point coverage mean / median |",
+        "|---|---|---|---|---|---|",
+    ]
+    for cell in [*dict.fromkeys(r["cell"] for r in rows), "all"]:
+        sel = rows if cell == "all" else [r for r in rows if r["cell"] == cell]
+        cand = [r for r in sel if r["method"] != "auto" and "noise_mm" in r]
+        if not cand:
+            continue
+        before = [
+            _ratio_ok(predict_mm({**r, "weak_fraction": 0.0, "outlier_fraction": 0.0}), _true_mm(r))
+            for r in cand
+        ]
+        after = [_ratio_ok(r["expected_error_mm"], _true_mm(r)) for r in cand]
+        both = [_ratio_ok(r["expected_error_mm"], _true_mm(r)) for r in sel]
+        cov = [r["covered"] for r in sel if "covered" in r]
+        out.append(
+            f"| {cell} | {len(cand)} (+{len(sel) - len(cand)}) | {np.mean(before):.1%} | {np.mean(after):.1%} | "
+            f"{np.mean(both):.1%} | {np.mean(cov):.1%} / {np.median(cov):.1%} |"
+        )
     return "\n".join(out)
 
 
