@@ -51,7 +51,7 @@ log = logging.getLogger(__name__)
 STOP_EXCESS = 1.3
 #: ... and its held-out prediction error at most this multiple of the noise at the joints' depth (mm/mm),
 STOP_HOLDOUT = 1.1
-#: ... and at most this share of its expected error from weakly observed points and contradicted images.
+#: ... and at most this share of its expected error from images the other cameras contradict.
 STOP_HIDDEN = 0.5
 
 
@@ -215,12 +215,16 @@ def candidates(
 
 
 def _hidden_mm(quality: Mapping[str, Any]) -> float:
-    """The part of ``expected_error_mm`` from weakly observed points and contradicted images, mm."""
+    """The part of ``expected_error_mm`` from images the other cameras contradict, mm.
+
+    Weakly observed points are left out: where the capture itself has one camera at a time (cameras
+    started apart, a blind one left out) no other candidate places them better, and the weak share alone
+    cannot tell that from clocks that pulled the cameras apart.
+    """
     from gttnet.quality import CALIBRATION
 
-    weak = float(quality.get("weak_fraction") or 0.0) * float(quality.get("weak_mm") or 0.0)
     out = float(quality.get("outlier_fraction") or 0.0) * float(quality.get("outlier_mm") or 0.0)
-    return weak + float(CALIBRATION.get("outlier_factor", 1.0)) * out
+    return float(CALIBRATION.get("outlier_factor", 1.0)) * out
 
 
 def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
@@ -232,8 +236,8 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     without a pose (a camera no clock could be recovered for, reported as left out: ``blind_mm`` 0) or
     placed by its timestamp (``timed``: the candidate solves on the given timestamps). No other candidate
     has evidence to place such images better: the less informed ones can only guess where in the motion
-    they belong. And what the medians cannot see (weakly observed points, images the other cameras
-    contradict: :mod:`gttnet.quality`) makes at most :data:`STOP_HIDDEN` of its expected error.
+    they belong. And what the medians cannot see, images the other cameras contradict
+    (:mod:`gttnet.quality`), makes at most :data:`STOP_HIDDEN` of its expected error.
     """
     if quality.get("sigma_px") is None:
         return False
