@@ -51,7 +51,7 @@ log = logging.getLogger(__name__)
 STOP_EXCESS = 1.3
 #: ... and its held-out prediction error at most this multiple of the noise at the joints' depth (mm/mm),
 STOP_HOLDOUT = 1.1
-#: ... and at most this share of its expected error from images the other cameras contradict.
+#: ... and at most this share of its expected error from what the medians cannot see (:func:`_hidden_mm`).
 STOP_HIDDEN = 0.5
 
 
@@ -214,17 +214,21 @@ def candidates(
     yield "dloe", {}
 
 
-def _hidden_mm(quality: Mapping[str, Any]) -> float:
-    """The part of ``expected_error_mm`` from images the other cameras contradict, mm.
+def _hidden_mm(quality: Mapping[str, Any], *, timed: bool = False) -> float:
+    """The part of ``expected_error_mm`` the medians cannot see and another candidate might do better on, mm.
 
-    Weakly observed points are left out: where the capture itself has one camera at a time (cameras
-    started apart, a blind one left out) no other candidate places them better, and the weak share alone
-    cannot tell that from clocks that pulled the cameras apart.
+    Images the other cameras contradict always count; weakly observed points only where the candidate
+    recovered the timing and no camera was left out: with given timestamps, or with a blind camera left
+    out, they are the capture's own (one camera at a time) and no other candidate places them better,
+    while recovered clocks that pulled the cameras apart (a wrong declared rate) leave them too.
     """
     from gttnet.quality import CALIBRATION
 
     out = float(quality.get("outlier_fraction") or 0.0) * float(quality.get("outlier_mm") or 0.0)
-    return float(CALIBRATION.get("outlier_factor", 1.0)) * out
+    hidden = float(CALIBRATION.get("outlier_factor", 1.0)) * out
+    if not timed and not (quality.get("blind_fraction") or 0.0):
+        hidden += float(quality.get("weak_fraction") or 0.0) * float(quality.get("weak_mm") or 0.0)
+    return hidden
 
 
 def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
@@ -236,8 +240,8 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
     without a pose (a camera no clock could be recovered for, reported as left out: ``blind_mm`` 0) or
     placed by its timestamp (``timed``: the candidate solves on the given timestamps). No other candidate
     has evidence to place such images better: the less informed ones can only guess where in the motion
-    they belong. And what the medians cannot see, images the other cameras contradict
-    (:mod:`gttnet.quality`), makes at most :data:`STOP_HIDDEN` of its expected error.
+    they belong. And what the medians cannot see (:func:`_hidden_mm`: contradicted images, weak points under
+    recovered clocks) makes at most :data:`STOP_HIDDEN` of its expected error.
     """
     if quality.get("sigma_px") is None:
         return False
@@ -247,7 +251,7 @@ def decisive(quality: Mapping[str, Any], *, timed: bool = False) -> bool:
         and float(quality.get("blind_mm") or 0.0) > 0.0
     ):
         return False
-    if _hidden_mm(quality) > STOP_HIDDEN * float(quality.get("expected_error_mm") or 0.0):
+    if _hidden_mm(quality, timed=timed) > STOP_HIDDEN * float(quality.get("expected_error_mm") or 0.0):
         return False
     ex, hold = quality.get("excess"), quality.get("holdout_ratio")
     if ex is None or hold is None:

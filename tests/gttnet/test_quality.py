@@ -194,21 +194,16 @@ def test_reconstruct_json_has_quality_and_outputs_the_uncertainty(tmp_path):
     assert r.exit_code == 0 and "quality: expected error ~" in r.output
 
 
-def test_contradicted_images_keep_auto_searching():
-    """Medians at the noise floor are not decisive while contradicted images make most of the expected error."""
+def test_hidden_error_keeps_auto_searching():
+    """Medians at the noise floor are not decisive while what they cannot see makes most of the expected error."""
     from gttnet.auto import decisive
 
-    clean = {
-        "sigma_px": 2.0,
-        "blind_fraction": 0.0,
-        "excess": 1.0,
-        "holdout_ratio": 1.0,
-        "expected_error_mm": 10.0,
-    }
-    assert decisive(clean) and decisive(
-        {**clean, "outlier_fraction": 0.01, "outlier_mm": 200.0}
-    )  # 3 of 10 mm
+    clean = {"sigma_px": 2.0, "blind_fraction": 0.0, "excess": 1.0, "holdout_ratio": 1.0}
+    clean["expected_error_mm"] = 10.0
+    assert decisive(clean)
+    assert decisive({**clean, "outlier_fraction": 0.01, "outlier_mm": 200.0})  # 3 of 10 mm
     assert not decisive({**clean, "outlier_fraction": 0.2, "outlier_mm": 300.0})
-    assert decisive(
-        {**clean, "weak_fraction": 0.08, "weak_mm": 400.0}
-    )  # the capture may hold one camera only
+    weak = {**clean, "weak_fraction": 0.08, "weak_mm": 400.0}
+    assert not decisive(weak)  # recovered clocks may have pulled the cameras apart
+    assert decisive(weak, timed=True)  # given timestamps: the capture's own one-camera stretches
+    assert decisive({**weak, "blind_fraction": 0.3, "blind_mm": 0.0})  # a camera left out: likewise
