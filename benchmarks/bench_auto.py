@@ -10,7 +10,8 @@ Run (the test half is only reported, never tuned on):
 
 Cells are the recipes under ``recipes/gttdata/ood/`` (periodic walks with 30 % missing joints at 1 and 5 px,
 25/50/60 Hz and mixed rates, non-uniform timestamps, far cameras, pan-tilt-zoom cameras, a quadruped, one
-camera declared with a wrong frame rate, a blind camera, a second person in some frames); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
+camera declared with a wrong frame rate, a blind camera, a second person in some frames, a quadruped turning
+at 10 Hz, fast for the rate: ``fast_10hz``); captures are built in memory (``gttdata.generate_plan.build_sample``, ~300 images each).
 Per capture and sequencing condition every candidate method runs (``gttnet.auto.candidates`` for that
 condition, order-free methods included), then ``auto`` itself. Per cell it prints each method's mean MPJPE,
 auto's picks, auto's regret (its MPJPE over the best method's on the same capture and condition: the best
