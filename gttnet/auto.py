@@ -62,6 +62,25 @@ MIN_TRIED = {"none": 2}
 INFORMED = {"hpf": 3, "sync": 2, "stream-sync": 2, "gttnet": 1, "dloe": 1, "pseudo": 0}
 
 
+def _own_expected(q: Mapping[str, Any]) -> float:
+    """A candidate's expected error before the disagreement bound of :func:`_agreement`, mm."""
+    return float(q.get("own_expected_error_mm", q["expected_error_mm"]))
+
+
+def _requalified(
+    rec: Reconstruction, q: dict[str, Any], row: dict[str, Any], unc: np.ndarray | None
+) -> Reconstruction:
+    """``rec`` with the self-assessment ``q`` and per-point uncertainty ``unc``; its report ``row`` follows."""
+    row["expected_error_mm"] = q["expected_error_mm"]
+    row["reasons"] = list(q["reasons"])
+    return replace(rec, info={**rec.info, "quality": q}, uncertainty_mm=unc)
+
+
+def _scaled(unc: np.ndarray | None, raised: float, own: float) -> np.ndarray | None:
+    """The per-point uncertainty ``unc`` scaled as the expected error went from ``own`` to ``raised``."""
+    return unc if unc is None or own <= 0 else unc * (raised / own)
+
+
 def _agreement(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> list[Reconstruction]:
     """Raise each candidate's expected error to what its disagreement with the less-informed ones implies.
 
@@ -75,10 +94,7 @@ def _agreement(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> list[R
     """
     if len(recs) < 2:
         return recs
-    own = [
-        float(r.info["quality"].get("own_expected_error_mm", r.info["quality"]["expected_error_mm"]))
-        for r in recs
-    ]
+    own = [_own_expected(r.info["quality"]) for r in recs]
     out = []
     for i, a in enumerate(recs):
         bound, other = 0.0, ""
@@ -87,9 +103,7 @@ def _agreement(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> list[R
                 continue
             d = 1000.0 * np.linalg.norm(a.points3d - b.points3d, axis=-1)
             dist = float(np.nanmean(d)) if np.isfinite(d).any() else 0.0
-            own_b = float(
-                b.info["quality"].get("own_expected_error_mm", b.info["quality"]["expected_error_mm"])
-            )
+            own_b = _own_expected(b.info["quality"])
             if dist - own_b > bound:
                 bound, other = dist - own_b, b.info.get("method_ran", b.method)
         q = {**a.info["quality"], "own_expected_error_mm": own[i]}
@@ -99,12 +113,8 @@ def _agreement(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> list[R
             q["reasons"].append(
                 f"disagrees with {other} by more than their expected errors allow: at least {bound:.1f} mm"
             )
-        rows[i]["expected_error_mm"] = q["expected_error_mm"]
-        rows[i]["reasons"] = list(q["reasons"])
-        unc = a.uncertainty_mm
-        if unc is not None and own[i] > 0:
-            unc = unc * (q["expected_error_mm"] / own[i])
-        out.append(replace(a, info={**a.info, "quality": q}, uncertainty_mm=unc))
+        unc = _scaled(a.uncertainty_mm, q["expected_error_mm"], own[i])
+        out.append(_requalified(a, q, rows[i], unc))
     return out
 
 
@@ -147,9 +157,7 @@ def _common_noise(
             f"read along {ref.info.get('method_ran', ref.method)}'s order: its own reads {own(r):.1f} px "
             f"of noise, that one {sigma:.2f} px"
         )
-        rows[i]["expected_error_mm"] = quality["expected_error_mm"]
-        rows[i]["reasons"] = list(quality["reasons"])
-        out.append(replace(r, info={**r.info, "quality": quality}, uncertainty_mm=unc))
+        out.append(_requalified(r, quality, rows[i], unc))
     return out
 
 
@@ -185,9 +193,10 @@ def _clock_excess(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> lis
         ):
             out.append(r)
             continue
-        excess_px = float(np.sqrt(max(float(rms) ** 2 - expected_clock_rms_px(float(sigma)) ** 2, 0.0)))
+        right = expected_clock_rms_px(float(sigma))
+        excess_px = float(np.sqrt(max(float(rms) ** 2 - right**2, 0.0)))
         excess_mm = CLOCK_EXCESS_FACTOR * excess_px * float(noise_mm) / float(sigma)
-        own = float(q.get("own_expected_error_mm", q["expected_error_mm"]))
+        own = _own_expected(q)
         raised = round(float(np.hypot(own, excess_mm)), 3)
         q = {**q, "clock_excess_mm": round(excess_mm, 3), "expected_error_mm": raised}
         q["own_expected_error_mm"] = raised
@@ -195,14 +204,9 @@ def _clock_excess(recs: list[Reconstruction], rows: list[dict[str, Any]]) -> lis
             q["reasons"] = [
                 *q.get("reasons", []),
                 f"the clock fit leaves {float(rms):.2f} px where right clocks leave "
-                f"{expected_clock_rms_px(float(sigma)):.2f} px: {excess_mm:.1f} mm added",
+                f"{right:.2f} px: {excess_mm:.1f} mm added",
             ]
-        rows[i]["expected_error_mm"] = raised
-        rows[i]["reasons"] = list(q["reasons"])
-        unc = r.uncertainty_mm
-        if unc is not None and own > 0:
-            unc = unc * (raised / own)
-        out.append(replace(r, info={**r.info, "quality": q}, uncertainty_mm=unc))
+        out.append(_requalified(r, q, rows[i], _scaled(r.uncertainty_mm, raised, own)))
     return out
 
 
